@@ -1,0 +1,1 @@
+"""Scenario building: road networks, charging stations and daily demand (no libsumo here)."""
