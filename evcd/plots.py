@@ -1,0 +1,79 @@
+"""Figures a person looks at: the scenario map and the station queues over a day."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import sumolib
+from matplotlib import colormaps
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+from evcd.atomic import atomic_write_bytes
+from evcd.scenario.stations_file import Station
+
+
+def plot_scenario_day(
+    net: sumolib.net.Net,
+    stations: Sequence[Station],
+    times_s: np.ndarray,
+    waiting: Mapping[str, np.ndarray],
+    charging: Mapping[str, np.ndarray],
+    path: str | Path,
+    title: str = "",
+) -> Path:
+    """Save a PNG: the road network with the stations (left) and each station's queue over the day (right).
+
+    Args:
+        net: the network.
+        stations: the stations, in the order their colours are assigned.
+        times_s: sample times (s of day).
+        waiting: station id -> number of EVs waiting at each sample.
+        charging: station id -> number of EVs charging at each sample.
+        path: PNG to write (atomically).
+        title: figure title.
+    """
+    # the object-oriented API: no pyplot, no global backend state
+    fig = Figure(figsize=(15, 6.5))
+    ax_map, ax_q = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.1, 1]})
+    segs, widths = [], []
+    for edge in net.getEdges(withInternal=False):
+        segs.append(edge.getShape())
+        widths.append(0.4 + 0.5 * edge.getLaneNumber())
+    ax_map.add_collection(LineCollection(segs, linewidths=widths, colors="0.55"))
+    colors = colormaps["tab10"](np.arange(len(stations)) % 10)
+    for st, c in zip(stations, colors, strict=True):
+        x, y = sumolib.geomhelper.positionAtShapeOffset(
+            net.getLane(st.lane).getShape(), (st.start_pos + st.end_pos) / 2
+        )
+        ax_map.plot(x, y, marker="*", markersize=22, color=c, markeredgecolor="k", zorder=5)
+        ax_map.annotate(f"{st.id}: {st.name}", (x, y), xytext=(8, 8), textcoords="offset points", fontsize=9,
+                        bbox={"boxstyle": "round", "fc": "white", "alpha": 0.8})  # fmt: skip
+    ax_map.autoscale()
+    ax_map.set_aspect("equal")
+    ax_map.set_xlabel("x (m)")
+    ax_map.set_ylabel("y (m)")
+    ax_map.set_title("Road network and charging stations")
+
+    hours = np.asarray(times_s) / 3600.0
+    for st, c in zip(stations, colors, strict=True):
+        ax_q.plot(hours, waiting[st.id], color=c, lw=1.6, label=f"{st.id} waiting")
+        ax_q.plot(hours, charging[st.id], color=c, lw=0.8, ls=":", alpha=0.8)
+    ax_q.plot([], [], color="k", lw=0.8, ls=":", label="charging (dotted)")
+    ax_q.set_xlim(0, 24)
+    ax_q.set_xticks(range(0, 25, 3))
+    ax_q.set_xlabel("time of day (h)")
+    ax_q.set_ylabel("EVs at the station")
+    ax_q.set_title("Queue per station over the day")
+    ax_q.grid(alpha=0.3)
+    ax_q.legend(loc="upper left", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    return atomic_write_bytes(path, buf.getvalue())

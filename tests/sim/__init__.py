@@ -1,0 +1,1 @@
+"""Tests of evcd.sim: the SUMO driver and the charging FIFO."""
