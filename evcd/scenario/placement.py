@@ -69,7 +69,7 @@ def nearest_edge(net: sumolib.net.Net, candidates: Sequence[str], lon: float, la
     try:
         x, y = net.convertLonLat2XY(lon, lat)
     except Exception as exc:  # sumolib raises plain exceptions when the net has no projection
-        raise ValueError(f"the network has no geo-reference, cannot place an anchor at {lon},{lat}") from exc
+        raise ValueError(f"cannot place an anchor at {lon},{lat}: no geo-reference ({exc!r})") from exc
     best, best_d = None, np.inf
     for eid in candidates:
         shape = np.asarray(net.getEdge(eid).getShape())
@@ -154,7 +154,8 @@ def place_stations(
         nearest = np.minimum(nearest, to[best])
     stations = []
     for i, c in enumerate(chosen):
-        name = anchors[i].name if i < len(anchors) else f"Station {i}"
+        street = net.getEdge(pool[c]).getName()
+        name = anchors[i].name if i < len(anchors) else (street or f"Station {i}")
         stations.append(_station_on(net, pool[c], f"cs{i}", name, points, power_w))
     log.info("placed %d stations, min pairwise road distance %.0f m", k, _min_pair(pair, chosen))
     return stations
