@@ -37,14 +37,16 @@ def plot_scenario_day(
         title: figure title.
     """
     # the object-oriented API: no pyplot, no global backend state
-    fig = Figure(figsize=(15, 6.5))
-    ax_map, ax_q = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.1, 1]})
+    m = len(stations)
+    fig = Figure(figsize=(15, max(6.5, 1.3 * m + 1)))
+    grid = fig.add_gridspec(m, 2, width_ratios=[1.1, 1])
+    ax_map = fig.add_subplot(grid[:, 0])
     segs, widths = [], []
     for edge in net.getEdges(withInternal=False):
         segs.append(edge.getShape())
         widths.append(0.4 + 0.5 * edge.getLaneNumber())
     ax_map.add_collection(LineCollection(segs, linewidths=widths, colors="0.55"))
-    colors = colormaps["tab10"](np.arange(len(stations)) % 10)
+    colors = colormaps["tab10"](np.arange(m) % 10)
     for st, c in zip(stations, colors, strict=True):
         x, y = sumolib.geomhelper.positionAtShapeOffset(
             net.getLane(st.lane).getShape(), (st.start_pos + st.end_pos) / 2
@@ -59,17 +61,23 @@ def plot_scenario_day(
     ax_map.set_title("Road network and charging stations")
 
     hours = np.asarray(times_s) / 3600.0
-    for st, c in zip(stations, colors, strict=True):
-        ax_q.plot(hours, waiting[st.id], color=c, lw=1.6, label=f"{st.id} waiting")
-        ax_q.plot(hours, charging[st.id], color=c, lw=0.8, ls=":", alpha=0.8)
-    ax_q.plot([], [], color="k", lw=0.8, ls=":", label="charging (dotted)")
-    ax_q.set_xlim(0, 24)
-    ax_q.set_xticks(range(0, 25, 3))
-    ax_q.set_xlabel("time of day (h)")
-    ax_q.set_ylabel("EVs at the station")
-    ax_q.set_title("Queue per station over the day")
-    ax_q.grid(alpha=0.3)
-    ax_q.legend(loc="upper left", fontsize=8)
+    top = max([1, *(int(np.max(waiting[s.id], initial=0)) for s in stations)])
+    top = max(top, *(s.points for s in stations))
+    for i, (st, c) in enumerate(zip(stations, colors, strict=True)):
+        ax = fig.add_subplot(grid[i, 1])
+        ax.fill_between(hours, waiting[st.id], step="post", color=c, alpha=0.6, label="waiting")
+        ax.step(hours, charging[st.id], where="post", color="k", lw=0.8, label="charging")
+        ax.set_xlim(0, 24)
+        ax.set_ylim(0, top + 0.5)
+        ax.set_xticks(range(0, 25, 3))
+        ax.tick_params(labelbottom=i == m - 1, labelsize=8)
+        ax.grid(alpha=0.3)
+        ax.set_ylabel(st.id, rotation=0, ha="right", va="center")
+        if i == 0:
+            ax.set_title("EVs waiting (filled) and charging (line) per station")
+            ax.legend(loc="upper left", fontsize=8, ncols=2)
+        if i == m - 1:
+            ax.set_xlabel("time of day (h)")
     if title:
         fig.suptitle(title)
     fig.tight_layout()

@@ -59,7 +59,7 @@ class DemandConfig:
             restore its random generators from a saved state, our seed does not need it to.
     """
 
-    cars_per_day: int = 12_000
+    cars_per_day: int = 20_000
     evs: int = 400
     charging_share: float = 0.4
     min_trip_m: float = 1_000.0

@@ -69,7 +69,10 @@ def simulate_day(
         warnings=False,
     )
     t0 = wallclock.perf_counter()
-    with driver, tqdm(total=end - begin, unit="sim s", disable=not progress, desc="day") as bar:
+    with (
+        driver,
+        tqdm(total=end - begin, unit="sim s", disable=not progress, desc="day", mininterval=2.0) as bar,
+    ):
         driver.add_listener(controller.update)
         driver.add_listener(traffic.on_step)
         now = driver.time
