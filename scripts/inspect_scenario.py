@@ -24,22 +24,15 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.atomic import atomic_write_text
+from evcd.config_utils import demand_config
 from evcd.plots import plot_scenario_day
-from evcd.scenario.demand import DAY, DemandConfig, generate_demand, write_demand
-from evcd.scenario.netstats import network_summary
+from evcd.scenario.demand import DAY, generate_demand, write_demand
+from evcd.scenario.netstats import format_summary, network_summary
 from evcd.scenario.scenario import load_scenario
 from evcd.scenario_report import day_summary, format_table, station_distance_matrix, station_table
 from evcd.sim.day import simulate_day
 
 log = logging.getLogger("inspect_scenario")
-
-
-def demand_config(cfg: DictConfig) -> DemandConfig:
-    """The DemandConfig of a composed config (``scenario.demand`` plus the top-level ``evs``)."""
-    d = OmegaConf.to_container(cfg.scenario.demand, resolve=True)
-    for key in ("hourly_profile", "battery_wh", "soc_charging", "soc_other", "target_soc"):
-        d[key] = tuple(d[key])
-    return DemandConfig(evs=int(cfg.evs), **d)
 
 
 def inspect(cfg: DictConfig, out_dir: Path) -> dict:
@@ -54,7 +47,7 @@ def inspect(cfg: DictConfig, out_dir: Path) -> dict:
 
     net = network_summary(scenario.net_file)
     dist = station_distance_matrix(scenario)
-    log.info("network %s:\n%s", scenario.net_file, format_table([net]))
+    log.info("network %s: %s", scenario.net_file.name, format_summary(net))
     names = [s.id for s in scenario.stations]
     rows = [
         {"from/to": a, **{b: float(dist[i, j]) for j, b in enumerate(names)}} for i, a in enumerate(names)
