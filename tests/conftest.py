@@ -47,3 +47,12 @@ def small_scenario(tmp_path_factory: pytest.TempPathFactory) -> SmallScenario:
     stations_file = write_stations(list(stations), root / "stations.add.xml")
     vtypes_file = write_vtypes(root / "vtypes.add.xml")
     return SmallScenario(root, net_file, stations_file, vtypes_file, stations)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _isolated_snapshot_cache(tmp_path_factory: pytest.TempPathFactory):
+    """Day snapshots built by tests (and the scripts they start) go to a temporary cache, never ~/.cache."""
+    patch = pytest.MonkeyPatch()
+    patch.setenv("EVCD_CACHE", str(tmp_path_factory.mktemp("evcd_cache")))
+    yield
+    patch.undo()

@@ -1,0 +1,75 @@
+"""Dispatchers: who picks the charging station.
+
+    rng = np.random.default_rng(seed)
+    agent = make_agent("greedy", n_stations=5, rng=rng)      # or make_agent_for_env("greedy", env, rng)
+
+The registry maps a name to a class path and imports it on first use, so that the heuristics do not
+pay for torch when learning agents join it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+from typing import Any
+
+import numpy as np
+
+from evcd.agents.base import Agent, Transition, split_observation
+
+#: Agent name -> ``module:Class``.
+_REGISTRY: dict[str, str] = {
+    "random": "evcd.agents.heuristics:RandomAgent",
+    "greedy": "evcd.agents.heuristics:GreedyAgent",
+    "queue_aware": "evcd.agents.heuristics:QueueAwareAgent",
+}
+AGENT_NAMES: tuple[str, ...] = tuple(_REGISTRY)
+
+
+def agent_class(name: str) -> type[Agent]:
+    """The agent class registered as ``name``.
+
+    Raises:
+        ValueError: ``name`` is not registered (the message lists the registered names).
+    """
+    if name not in _REGISTRY:
+        raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(AGENT_NAMES)}")
+    module, _, cls_name = _REGISTRY[name].partition(":")
+    return getattr(importlib.import_module(module), cls_name)
+
+
+def _check_kwargs(cls: type[Agent], name: str, kwargs: dict[str, Any]) -> None:
+    params = list(inspect.signature(cls.__init__).parameters)[3:]  # after self, n_stations, rng
+    unknown = sorted(set(kwargs) - set(params))
+    if unknown:
+        raise ValueError(f"agent {name!r}: unknown options {unknown}; it takes {params or 'none'}")
+
+
+def make_agent(name: str, n_stations: int, rng: np.random.Generator, **kwargs: Any) -> Agent:
+    """A new agent ``name`` for ``n_stations`` stations drawing from ``rng``; ``kwargs`` go to its class.
+
+    Raises:
+        ValueError: unknown agent or option, or a bad value (each message names it).
+    """
+    cls = agent_class(name)
+    _check_kwargs(cls, name, kwargs)
+    return cls(n_stations, rng, **kwargs)
+
+
+def make_agent_for_env(name: str, env: Any, rng: np.random.Generator, **kwargs: Any) -> Agent:
+    """:func:`make_agent` with the number of stations and the settings the agent needs read off
+    ``env`` (a :class:`~evcd.env.ChargingNavEnv`, wrapped or not); ``kwargs`` override them."""
+    cls = agent_class(name)
+    _check_kwargs(cls, name, kwargs)
+    return cls.from_env(env, rng, **kwargs)
+
+
+__all__ = [
+    "AGENT_NAMES",
+    "Agent",
+    "Transition",
+    "agent_class",
+    "make_agent",
+    "make_agent_for_env",
+    "split_observation",
+]

@@ -1,0 +1,57 @@
+"""Turning a composed Hydra config into library arguments (shared by ``scripts/*.py``).
+
+Library code takes explicit arguments; these helpers are the one place where the scripts' config
+layout (``conf/``) meets them: ``scenario.*`` + top-level ``evs`` -> :class:`DemandConfig`,
+``scenario.*`` + ``env.*`` -> :class:`~evcd.env.ChargingNavEnv` keyword arguments. Relative paths
+are resolved against the directory the script was started from (Hydra's original cwd).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hydra.utils import to_absolute_path
+from omegaconf import DictConfig, OmegaConf
+
+from evcd.scenario.demand import DemandConfig
+
+_TUPLE_FIELDS = ("hourly_profile", "battery_wh", "soc_charging", "soc_other", "target_soc")
+_PATH_KEYS = ("route_file", "cache_dir")
+
+
+def demand_config(cfg: DictConfig) -> DemandConfig:
+    """The DemandConfig of a composed config (``scenario.demand`` plus the top-level ``evs``).
+
+    Raises:
+        ValueError: a value out of range (the message names it).
+    """
+    evs = cfg.evs
+    if isinstance(evs, bool) or not isinstance(evs, int):
+        raise ValueError(f"evs={evs!r}: must be an integer >= 0")
+    d = OmegaConf.to_container(cfg.scenario.demand, resolve=True)
+    for key in _TUPLE_FIELDS:
+        d[key] = tuple(d[key])
+    return DemandConfig(evs=evs, **d)
+
+
+def env_kwargs(cfg: DictConfig) -> dict[str, Any]:
+    """Keyword arguments of :class:`~evcd.env.ChargingNavEnv` from ``scenario``, ``evs`` and ``env``.
+
+    With ``env.route_file`` set, the route file is the whole background day: ``evs`` and
+    ``scenario.demand`` are left out (the env refuses both together).
+
+    Raises:
+        ValueError: a demand value out of range (the env checks the rest when constructed).
+    """
+    kwargs: dict[str, Any] = OmegaConf.to_container(cfg.env, resolve=True)
+    kwargs["departure_window"] = tuple(kwargs["departure_window"])
+    kwargs["demand_seeds"] = tuple(kwargs["demand_seeds"])
+    for key in _PATH_KEYS:
+        if kwargs.get(key) is not None:
+            kwargs[key] = to_absolute_path(str(kwargs[key]))
+    kwargs["scenario"] = to_absolute_path(str(cfg.scenario.path))
+    kwargs["charging_points"] = cfg.scenario.charging_points
+    if kwargs.get("route_file") is None:
+        kwargs["demand"] = demand_config(cfg)
+        kwargs["evs"] = int(cfg.evs)
+    return kwargs

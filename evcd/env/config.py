@@ -1,0 +1,137 @@
+"""The environment's settings, checked before any simulation starts."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from evcd.scenario.demand import DAY, DemandConfig
+from evcd.scenario.scenario import JURONG_WEST, Scenario, load_scenario
+from evcd.sim.snapshots import DaySpec
+
+PROTOCOLS = ("fast", "paper")
+#: Paper protocol: every episode's simulation runs until 23:59.
+PAPER_DAY_END = DAY - 60.0
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Everything :class:`~evcd.env.ChargingNavEnv` takes (see its docstring for the meaning).
+
+    Raises ``ValueError`` naming the offending value on construction; :meth:`load` then opens the
+    scenario (still without starting SUMO).
+    """
+
+    scenario: str | Path = JURONG_WEST
+    evs: int | None = None
+    decision_interval: float = 60.0
+    departure_window: tuple[float, float] = (0.0, float(DAY))
+    max_travel_time: float = 7200.0
+    stuck_limit: float = 600.0
+    reward: str | Callable[..., float] = "paper"
+    normalize_obs: bool = False
+    protocol: str = "fast"
+    charging_points: int | None = None
+    demand: DemandConfig | Mapping[str, Any] | None = None
+    demand_seeds: Sequence[int] = (0,)
+    route_file: str | Path | None = None
+    cache_dir: str | Path | None = None
+    snapshot_every: float = 300.0
+    step_length: float = 1.0
+    time_to_teleport: float = 300.0
+    day_end: float = PAPER_DAY_END
+    max_insert_delay: float = 600.0
+    demand_config: DemandConfig = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        from evcd.env.reward import REWARDS
+
+        def positive(name: str) -> None:
+            value = getattr(self, name)
+            if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}={value!r}: must be a finite number > 0")
+
+        for name in ("decision_interval", "max_travel_time", "stuck_limit", "snapshot_every", "step_length"):
+            positive(name)
+        positive("max_insert_delay")
+        if self.decision_interval < self.step_length:
+            raise ValueError(
+                f"decision_interval={self.decision_interval} must be >= step_length={self.step_length}"
+            )
+        if self.protocol not in PROTOCOLS:
+            raise ValueError(f"protocol={self.protocol!r}: must be one of {PROTOCOLS}")
+        if self.evs is not None and (not isinstance(self.evs, numbers.Integral) or self.evs < 0):
+            raise ValueError(f"evs={self.evs!r}: must be an integer >= 0")
+        if self.charging_points is not None and (
+            not isinstance(self.charging_points, numbers.Integral) or self.charging_points < 1
+        ):
+            raise ValueError(f"charging_points={self.charging_points!r}: must be an integer >= 1")
+        try:
+            lo, hi = (float(x) for x in self.departure_window)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"departure_window={self.departure_window!r}: must be (start, end) in s"
+            ) from None
+        if not 0 <= lo < hi <= DAY or hi - lo < self.step_length:
+            raise ValueError(
+                f"departure_window={self.departure_window!r}: need 0 <= start < end <= {DAY}, "
+                f"at least one step long"
+            )
+        object.__setattr__(self, "departure_window", (lo, hi))
+        if not (isinstance(self.day_end, numbers.Real) and self.day_end >= 0):
+            raise ValueError(f"day_end={self.day_end!r}: must be >= 0 (s of day)")
+        if not callable(self.reward) and self.reward not in REWARDS:
+            raise ValueError(f"reward={self.reward!r}: must be one of {sorted(REWARDS)} or a callable")
+        seeds = tuple(self.demand_seeds)
+        if not seeds or any(
+            not isinstance(s, numbers.Integral) or isinstance(s, bool) or s < 0 for s in seeds
+        ):
+            raise ValueError(f"demand_seeds={self.demand_seeds!r}: must be a non-empty list of integers >= 0")
+        object.__setattr__(self, "demand_seeds", tuple(int(s) for s in seeds))
+        if self.route_file is not None:
+            if self.demand is not None or self.evs is not None or seeds != (0,):
+                raise ValueError(
+                    f"route_file={str(self.route_file)!r} is the whole background day: "
+                    "leave demand, evs and demand_seeds unset"
+                )
+            if not Path(self.route_file).is_file():
+                raise ValueError(f"route_file={str(self.route_file)!r}: no such file")
+        object.__setattr__(self, "demand_config", self._demand_config())
+
+    def _demand_config(self) -> DemandConfig:
+        demand = self.demand
+        if demand is None:
+            demand = DemandConfig()
+        elif isinstance(demand, Mapping):
+            known = {f.name for f in dataclasses.fields(DemandConfig)}
+            unknown = sorted(set(demand) - known)
+            if unknown:
+                raise ValueError(f"demand: unknown keys {unknown}; known: {sorted(known)}")
+            values = {k: tuple(v) if isinstance(v, list) else v for k, v in demand.items()}
+            demand = dataclasses.replace(DemandConfig(), **values)
+        elif not isinstance(demand, DemandConfig):
+            raise ValueError(f"demand={demand!r}: must be a DemandConfig, a dict of its fields or None")
+        if self.evs is not None:
+            demand = dataclasses.replace(demand, evs=int(self.evs))
+        return demand
+
+    def load(self) -> tuple[Scenario, list[DaySpec]]:
+        """Open the scenario and describe the background days (no SUMO yet).
+
+        Raises:
+            ValueError: the scenario folder is missing or malformed (e.g. no stations file).
+        """
+        try:
+            scenario = load_scenario(self.scenario, charging_points=self.charging_points)
+        except (FileNotFoundError, ValueError) as exc:
+            raise ValueError(f"scenario={str(self.scenario)!r}: {exc}") from exc
+        common = {"step_length": self.step_length, "time_to_teleport": self.time_to_teleport}
+        if self.route_file is not None:
+            return scenario, [DaySpec(scenario, route_file=Path(self.route_file).resolve(), **common)]
+        days = [DaySpec(scenario, self.demand_config, seed, **common) for seed in self.demand_seeds]
+        return scenario, days

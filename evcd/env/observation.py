@@ -1,0 +1,183 @@
+"""The navigation centre's view: distance, road load and station load per station.
+
+For each station ``i`` (in the scenario's order), from the target's current position:
+
+- ``D[i]``: driving distance (m) along the route SUMO's router finds (``simulation.findRoute`` from
+  the target's current edge, junction-internal edges included) to the end of the station's car park
+  (the position SUMO's parking stop aims at). On the station's own edge before the car park it is
+  the distance along the edge; past it, the loop through the best successor edge. 0 for the
+  station whose car park the target is in.
+- ``N[i]``: vehicles currently on that route's edges (``edge.getLastStepVehicleNumber``), not
+  counting the target. Vehicles parked off-road in car parks are not on an edge.
+- ``Z[i]``: vehicles at station ``i``, charging + waiting (:meth:`ChargingController.occupancy`;
+  the target counts once it has joined the queue).
+
+Cost per observation: one ``findRoute`` per station (a few more in the rare loop case) and one
+``getLastStepVehicleNumber`` per distinct edge of the union of the routes; no per-vehicle calls.
+
+With normalisation, ``D`` is in km, ``N`` in tens of vehicles and ``Z`` in multiples of the
+station's charging points (1 = all points busy, above 1 = a queue).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from evcd.scenario.routing import RoadGraph
+from evcd.scenario.stations_file import Station
+from evcd.sim.charging import ChargingController
+from evcd.sim.driver import SUMO_ERRORS
+
+log = logging.getLogger(__name__)
+
+#: ``D`` of a station the router finds no route to (m); also the upper bound of ``D``.
+UNREACHABLE_M = 1.0e6
+#: Upper bound of ``N`` in the observation space.
+MAX_VEHICLES = 1.0e6
+D_SCALE_M = 1000.0
+N_SCALE = 10.0
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One observation, raw (``D`` in m, counts) and as the float32 vector the agent sees."""
+
+    distance: np.ndarray  # D, float64 (m)
+    vehicles: np.ndarray  # N, int
+    occupancy: np.ndarray  # Z, int
+    routes: tuple[tuple[str, ...], ...]  # the route to each station, starting with the current edge
+    vector: np.ndarray  # float32 [D, N, Z], normalised if asked
+
+
+def to_vector(
+    dist: np.ndarray,
+    vehicles: np.ndarray,
+    occupancy: np.ndarray,
+    stations: Sequence[Station],
+    normalize: bool,
+) -> np.ndarray:
+    """The float32 vector ``[D, N, Z]``, normalised or raw."""
+    if normalize:
+        points = np.array([st.points for st in stations], dtype=np.float64)
+        parts = (dist / D_SCALE_M, vehicles / N_SCALE, occupancy / points)
+    else:
+        parts = (dist, vehicles, occupancy)
+    return np.concatenate(parts).astype(np.float32)
+
+
+def observation_bounds(stations: Sequence[Station], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest possible vectors (``Z`` is bounded by the car parks' capacity)."""
+    m = len(stations)
+    lots = np.array([st.lot_capacity for st in stations], dtype=np.float64)
+    high = to_vector(np.full(m, UNREACHABLE_M), np.full(m, MAX_VEHICLES), lots, stations, normalize)
+    return np.zeros(3 * m, dtype=np.float32), high
+
+
+class RouteObserver:
+    """Computes :class:`Observation`\\ s for one scenario.
+
+    Args:
+        stations: the scenario's stations, in action order.
+        graph: the network's drivable edges (lengths and successors).
+        vtype: vehicle type the router plans for (the target's).
+        normalize: scale the vector (see the module docstring).
+    """
+
+    def __init__(
+        self, stations: Sequence[Station], graph: RoadGraph, vtype: str = "ev", normalize: bool = False
+    ) -> None:
+        self.stations = tuple(stations)
+        self.graph = graph
+        self.vtype = vtype
+        self.normalize = normalize
+        self._edge_len = {st.edge: float(graph.lengths[graph.index[st.edge]]) for st in self.stations}
+
+    @property
+    def size(self) -> int:
+        """Length of the observation vector (3 x stations)."""
+        return 3 * len(self.stations)
+
+    def observe(
+        self,
+        api: Any,
+        controller: ChargingController,
+        road: str,
+        pos: float,
+        at_station: int | None = None,
+    ) -> Observation:
+        """Observe from a target on ``road`` at lane position ``pos``.
+
+        ``at_station``: index of the station whose car park the target is in (waiting), if any.
+        """
+        m = len(self.stations)
+        dist = np.empty(m)
+        routes: list[tuple[str, ...]] = []
+        for i, st in enumerate(self.stations):
+            if i == at_station:
+                d, edges = 0.0, ()
+            else:
+                d, edges = self._route(api, road, pos, st)
+            dist[i] = d
+            routes.append(edges)
+        counts = self._edge_counts(api, {e for r in routes for e in r})
+        vehicles = np.array([sum(counts[e] for e in r) for r in routes], dtype=np.int64)
+        if at_station is None:  # the target itself drives on its road, which starts every route
+            vehicles -= np.array([1 if r and road in r and counts[road] > 0 else 0 for r in routes])
+        occupancy = np.array(controller.occupancies(), dtype=np.int64)
+        return Observation(dist, vehicles, occupancy, tuple(routes), self.vector(dist, vehicles, occupancy))
+
+    def vector(self, dist: np.ndarray, vehicles: np.ndarray, occupancy: np.ndarray) -> np.ndarray:
+        """The float32 vector ``[D, N, Z]`` (normalised if the observer normalises)."""
+        return to_vector(dist, vehicles, occupancy, self.stations, self.normalize)
+
+    # ------------------------------------------------------------------ routing
+    def _route(self, api: Any, road: str, pos: float, st: Station) -> tuple[float, tuple[str, ...]]:
+        """Distance and edges from ``(road, pos)`` to the end of ``st``'s car park."""
+        tail = self._edge_len[st.edge] - st.end_pos  # the part of the last edge not driven
+        if road == st.edge:
+            if pos <= st.end_pos:
+                return st.end_pos - pos, (road,)
+            return self._loop(api, road, pos, st)
+        length, edges = self._find(api, road, st.edge)
+        if not edges:
+            return UNREACHABLE_M, ()
+        return length - pos - tail, edges
+
+    def loop_route(self, api: Any, road: str, pos: float, st: Station) -> tuple[float, tuple[str, ...]]:
+        """Route back to ``st`` for a vehicle on ``st``'s edge past its car park (or too close to
+        stop): leave the edge, then the shortest way back, through the best successor edge."""
+        return self._loop(api, road, pos, st)
+
+    def _loop(self, api: Any, road: str, pos: float, st: Station) -> tuple[float, tuple[str, ...]]:
+        tail = self._edge_len[st.edge] - st.end_pos
+        best: tuple[float, tuple[str, ...]] = (UNREACHABLE_M, ())
+        idx = self.graph.index.get(road)
+        succ = [] if idx is None else [self.graph.edge_ids[j] for j in self.graph.succ[idx]]
+        for nxt in succ:
+            hop, hop_edges = self._find(api, road, nxt)  # road + junction + next edge
+            back, back_edges = self._find(api, nxt, st.edge)
+            if not hop_edges or not back_edges:
+                continue
+            nxt_len = float(self.graph.lengths[self.graph.index[nxt]])
+            d = hop - pos + back - nxt_len - tail
+            if d < best[0]:
+                best = (d, (road, *back_edges))
+        return best
+
+    def _find(self, api: Any, src: str, dst: str) -> tuple[float, tuple[str, ...]]:
+        try:
+            stage = api.simulation.findRoute(src, dst, vType=self.vtype)
+        except SUMO_ERRORS as exc:
+            log.debug("no route %s -> %s: %s", src, dst, exc)
+            return UNREACHABLE_M, ()
+        return float(stage.length), tuple(stage.edges)
+
+    @staticmethod
+    def _edge_counts(api: Any, edges: set[str]) -> dict[str, int]:
+        count = api.edge.getLastStepVehicleNumber
+        return {e: count(e) for e in edges}

@@ -1,0 +1,174 @@
+"""The target EV: where and when it departs, how it is put into SUMO and sent to a station.
+
+The target is an ``ev`` vehicle added through the API (``evcd_target``), held by the charging
+controller (:meth:`ChargingController.hold`, plus ``evcd.hold=1``) so it never leaves a charging point
+by itself. Sending it to station ``i`` sets its route (the one the observation measured) and a
+parking stop at the station's car park (``parking=true``, a duration far beyond the day). It is
+re-routed only when the choice changes; choosing another station while it waits in a car park takes
+it out of that queue.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import sumolib
+
+from evcd.env.observation import RouteObserver
+from evcd.scenario.demand import DAY, DemandConfig
+from evcd.scenario.routing import RoadGraph
+from evcd.scenario.stations_file import Station
+from evcd.scenario.vtypes import EV_TYPE
+from evcd.sim.charging import HOLD_PARAM, ChargingController
+from evcd.sim.driver import SUMO_ERRORS
+
+log = logging.getLogger(__name__)
+
+TARGET_ID = "evcd_target"
+STOP_DURATION_S = 10.0 * DAY
+_MIN_ORIGIN_M = 20.0
+
+
+@dataclass(frozen=True)
+class TargetPlan:
+    """Where and when the target departs, and its battery.
+
+    Attributes:
+        departure: scheduled departure (s of day); ``T_travel`` is measured from it.
+        origin: SUMO edge it departs from.
+        depart_pos: position on ``origin`` (m).
+        capacity_wh: battery capacity (Wh).
+        soc: initial state of charge (low: it must charge).
+    """
+
+    departure: float
+    origin: str
+    depart_pos: float
+    capacity_wh: float
+    soc: float
+
+
+class OriginSampler:
+    """Origins for the target: normal drivable edges (> 20 m) from which every station is reachable,
+    drawn in proportion to their length (a uniformly random point of the road network)."""
+
+    def __init__(self, net: sumolib.net.Net, graph: RoadGraph, stations: Sequence[Station]) -> None:
+        ok = np.ones(len(graph.edge_ids), dtype=bool)
+        for st in stations:
+            ok &= np.isfinite(graph.distances_to(st.edge))
+        self.edges = [
+            e
+            for i, e in enumerate(graph.edge_ids)
+            if ok[i] and graph.lengths[i] > _MIN_ORIGIN_M and net.getEdge(e).getFunction() == ""
+        ]
+        if not self.edges:
+            raise ValueError("the network has no edge from which every station can be reached")
+        self.lengths = np.array([graph.lengths[graph.index[e]] for e in self.edges])
+        cdf = np.cumsum(self.lengths)
+        self._cdf = cdf / cdf[-1]
+
+    def draw(self, rng: np.random.Generator) -> tuple[str, float]:
+        """An origin edge and a position on it (not within 5 % of its ends)."""
+        i = int(min(np.searchsorted(self._cdf, rng.random(), side="right"), len(self.edges) - 1))
+        length = float(self.lengths[i])
+        return self.edges[i], round(float(rng.uniform(0.05, 0.95)) * length, 2)
+
+
+def draw_plan(
+    rng: np.random.Generator,
+    origins: OriginSampler,
+    window: tuple[float, float],
+    step_length: float,
+    battery: DemandConfig,
+) -> TargetPlan:
+    """Draw a target from ``rng`` (in a fixed order: departure, origin, position, battery)."""
+    lo, hi = window
+    steps = max(1, int((hi - lo) // step_length))
+    departure = lo + step_length * int(rng.integers(steps))
+    origin, pos = origins.draw(rng)
+    capacity = float(rng.uniform(*battery.battery_wh))
+    soc = float(rng.uniform(*battery.soc_charging))
+    return TargetPlan(float(departure), origin, pos, round(capacity, 1), round(soc, 4))
+
+
+class Target:
+    """The target EV of one episode in a running simulation.
+
+    Args:
+        plan: its departure.
+        route_id: a SUMO route id not used yet in this simulation (routes outlive loadState).
+    """
+
+    def __init__(self, plan: TargetPlan, route_id: str) -> None:
+        self.plan = plan
+        self.route_id = route_id
+        self.station: int | None = None  # current choice
+        self.switches = 0  # how often the choice changed after the first
+
+    def add(self, api: Any, controller: ChargingController) -> None:
+        """Add the target to the simulation, departing at ``plan.departure`` (must not be past)."""
+        p = self.plan
+        api.route.add(self.route_id, [p.origin])
+        api.vehicle.add(
+            TARGET_ID,
+            self.route_id,
+            typeID=EV_TYPE,
+            depart=f"{p.departure:g}",
+            departLane="best",
+            departPos=f"{p.depart_pos:.2f}",
+            departSpeed="0",
+        )
+        api.vehicle.setParameter(TARGET_ID, "device.battery.capacity", f"{p.capacity_wh:.1f}")
+        api.vehicle.setParameter(TARGET_ID, "device.battery.chargeLevel", f"{p.capacity_wh * p.soc:.1f}")
+        api.vehicle.setParameter(TARGET_ID, HOLD_PARAM, "1")
+        controller.hold(TARGET_ID)
+
+    @staticmethod
+    def location(api: Any) -> tuple[str, float, float]:
+        """Its road (edge id, junction-internal ones start with ``:``), lane position and odometer (m).
+
+        Raises a SUMO error if it is not in the simulation.
+        """
+        veh = api.vehicle
+        return veh.getRoadID(TARGET_ID), veh.getLanePosition(TARGET_ID), veh.getDistance(TARGET_ID)
+
+    def drive_to(
+        self,
+        api: Any,
+        controller: ChargingController,
+        index: int,
+        station: Station,
+        route: tuple[str, ...],
+        observer: RouteObserver,
+        road: str,
+        pos: float,
+        time: float,
+    ) -> None:
+        """Send the target to ``station`` (index ``index``) along ``route`` (from the observation).
+
+        Raises a SUMO error if SUMO refuses every way of stopping there.
+        """
+        if self.station is not None:
+            self.switches += 1
+        self.station = index
+        if controller.status(TARGET_ID) is not None:  # waiting in another car park: leave its queue
+            controller.release(api, TARGET_ID, time)
+            controller.hold(TARGET_ID)
+        veh = api.vehicle
+        if route and not route[0].startswith(":"):
+            veh.setRoute(TARGET_ID, route)  # drops the stop at the former station
+        else:  # on a junction: let SUMO route from the next edge
+            veh.changeTarget(TARGET_ID, station.edge)
+        try:
+            veh.setParkingAreaStop(TARGET_ID, station.parking_area, duration=STOP_DURATION_S)
+        except SUMO_ERRORS as exc:  # past the car park, or too close to brake for it: loop back
+            _, loop = observer.loop_route(api, road, pos, station)
+            log.debug("t=%s target cannot stop at %s now (%s); looping via %s", time, station.id, exc, loop)
+            if not loop:
+                raise
+            veh.setRoute(TARGET_ID, loop)
+            veh.setParkingAreaStop(TARGET_ID, station.parking_area, duration=STOP_DURATION_S)

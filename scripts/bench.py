@@ -1,0 +1,78 @@
+"""Benchmark the environment: fast vs paper episodes, overhead over raw SUMO, snapshot build.
+
+    python scripts/bench.py                 # Jurong West, 400 EVs: ~25 min on 2 cores
+    python scripts/bench.py --quick         # ends within about a minute (numbers are indicative)
+
+Writes ``bench.json`` (``--out``) with the measured ratios and every timed episode. All figures
+are measured in the same run, side by side; compare ratios, not absolute seconds, across machines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+import sys
+from pathlib import Path
+
+from evcd.atomic import atomic_write_text
+from evcd.bench import run_bench
+from evcd.scenario.demand import DemandConfig
+from evcd.scenario.scenario import JURONG_WEST
+
+log = logging.getLogger("bench")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit code."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenario", type=Path, default=JURONG_WEST, help="scenario folder (default Jurong West)")
+    p.add_argument("--evs", type=int, default=400, help="background EVs (default 400)")
+    p.add_argument("--fast-episodes", type=int, default=20, help="fast episodes (default 20)")
+    p.add_argument("--paper-episodes", type=int, default=3, help="paper episodes, first seeds (default 3)")
+    p.add_argument("--cache-dir", type=Path, default=None, help="snapshot cache (default: a fresh temp dir)")
+    p.add_argument("--out", type=Path, default=Path("bench.json"), help="result file (default bench.json)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if args.evs < 0 or args.fast_episodes < 1 or args.paper_episodes < 0:
+        log.error("need evs >= 0, fast-episodes >= 1, paper-episodes >= 0 (got %s, %s, %s)",
+                  args.evs, args.fast_episodes, args.paper_episodes)  # fmt: skip
+        return 2
+    if args.out.exists() and not args.force:
+        log.error("%s exists; pass --force to replace it", args.out)
+        return 2
+    env_kwargs: dict = {"scenario": args.scenario, "evs": args.evs}
+    paper_day_end = None
+    if args.quick:
+        # a night window: a short day build, light traffic; the paper protocol is cut 1 h after it
+        env_kwargs |= {"departure_window": (3600.0, 4200.0), "demand": DemandConfig(evs=args.evs)}
+        args.fast_episodes, args.paper_episodes = min(args.fast_episodes, 5), min(args.paper_episodes, 1)
+        paper_day_end = 4200.0 + 3600.0
+    else:
+        env_kwargs |= {"departure_window": (6 * 3600.0, 22 * 3600.0)}
+    try:
+        result = run_bench(env_kwargs, args.fast_episodes, args.paper_episodes, args.cache_dir, paper_day_end)
+    except (ValueError, FileNotFoundError) as exc:
+        log.error("%s", exc)
+        return 2
+    summary = result.summary()
+    report = {
+        "summary": summary,
+        "quick": args.quick,
+        "config": {k: str(v) for k, v in result.config.items()},
+        "fast": [dataclasses.asdict(e) for e in result.fast],
+        "paper": [dataclasses.asdict(e) for e in result.paper],
+        "raw_sumo_s": result.raw_sumo_s,
+    }
+    atomic_write_text(args.out, json.dumps(report, indent=1))
+    for key, value in summary.items():
+        log.info("%-45s %s", key, value)
+    log.info("wrote %s", args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
