@@ -46,22 +46,33 @@ def env_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("evcd_cache")
 
 
+class EnvFactory:
+    """Makes environments one at a time (libsumo: one simulation per process); closes them all."""
+
+    def __init__(self) -> None:
+        self.made = 0
+        self._envs: list[ChargingNavEnv] = []
+
+    def make(self, **kwargs: Any) -> ChargingNavEnv:
+        self.close()
+        env = ChargingNavEnv(**kwargs)
+        self._envs.append(env)
+        self.made += 1
+        return env
+
+    def close(self) -> None:
+        for env in self._envs:
+            env.close()
+
+
 @pytest.fixture
 def make_env(grid_env_dir: Path, env_cache: Path) -> Iterator[Callable[..., ChargingNavEnv]]:
     """``make_env(**overrides)``: a grid environment, closed after the test (one libsumo at a time)."""
-    envs: list[ChargingNavEnv] = []
-
-    def make(**overrides: Any) -> ChargingNavEnv:
-        for env in envs:  # libsumo: one simulation per process
-            env.close()
-        kwargs = {"scenario": grid_env_dir, "cache_dir": env_cache, **GRID_ENV, **overrides}
-        env = ChargingNavEnv(**kwargs)
-        envs.append(env)
-        return env
-
-    yield make
-    for env in envs:
-        env.close()
+    factory = EnvFactory()
+    yield lambda **overrides: factory.make(
+        **{"scenario": grid_env_dir, "cache_dir": env_cache, **GRID_ENV, **overrides}
+    )
+    factory.close()
 
 
 def run_episode(
@@ -98,12 +109,10 @@ def make_small_env(
     hand-built ``vehicles`` (see ``tests/env/handmade.py``) on the small 4 x 4 grid."""
     from tests.env.handmade import write_routes
 
-    envs: list[ChargingNavEnv] = []
+    factory = EnvFactory()
 
     def make(vehicles: list[str], **overrides: Any) -> ChargingNavEnv:
-        for env in envs:
-            env.close()
-        routes = write_routes(tmp_path / f"day{len(envs)}.rou.xml", vehicles)
+        routes = write_routes(tmp_path / f"day{factory.made}.rou.xml", vehicles)
         kwargs = {
             "scenario": small_scenario.root,
             "route_file": routes,
@@ -112,10 +121,7 @@ def make_small_env(
             "cache_dir": env_cache,
             **overrides,
         }
-        env = ChargingNavEnv(**kwargs)
-        envs.append(env)
-        return env
+        return factory.make(**kwargs)
 
     yield make
-    for env in envs:
-        env.close()
+    factory.close()

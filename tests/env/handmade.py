@@ -6,7 +6,10 @@ Stations, in action order: ``cs1`` (index 0, 2 points) on ``B1C1``, ``cs2`` (ind
 
 from __future__ import annotations
 
-from pathlib import Path
+from tests import route_xml
+from tests.route_xml import car, write_routes
+
+__all__ = ["car", "ev", "write_routes"]
 
 TO_CS1 = "A1B1 B1C1"
 TO_CS2 = "D2C2 C2B2"
@@ -24,27 +27,4 @@ def ev(
     hold: bool = False,
 ) -> str:
     """An EV driving ``route`` and, with ``lot``, parking there to charge from ``soc`` to ``target``."""
-    params = {
-        "device.battery.capacity": CAPACITY_WH,
-        "device.battery.chargeLevel": CAPACITY_WH * soc,
-        "evcd.targetSoc": target,
-    }
-    if hold:
-        params["evcd.hold"] = 1
-    body = "".join(f'<param key="{k}" value="{v}"/>' for k, v in params.items())
-    body += f'<route edges="{route}"/>'
-    if lot:
-        body += f'<stop parkingArea="{lot}" parking="true" duration="1000000"/>'
-    return f'<vehicle id="{vid}" type="ev" depart="{depart}" departSpeed="max">{body}</vehicle>'
-
-
-def car(vid: str, depart: float, route: str, stop: str = "") -> str:
-    """A conventional car driving ``route`` (``stop``: an optional ``<stop>`` element)."""
-    body = f'<route edges="{route}"/>{stop}'
-    return f'<vehicle id="{vid}" type="car" depart="{depart}" departSpeed="max">{body}</vehicle>'
-
-
-def write_routes(path: Path, vehicles: list[str]) -> Path:
-    """A route file of ``vehicles`` (give them in departure order: SUMO skips the others)."""
-    path.write_text("<routes>\n" + "\n".join(vehicles) + "\n</routes>\n", encoding="utf-8")
-    return path
+    return route_xml.ev(vid, depart, route, lot, capacity=CAPACITY_WH, soc=soc, target=target, hold=hold)

@@ -10,6 +10,8 @@ import pytest
 
 from evcd.sim.charging import ChargeRecord, ChargingController, Outcome
 from evcd.sim.driver import SumoDriver
+from tests import route_xml
+from tests.route_xml import write_routes
 
 PAST_CS1 = "A1B1 B1C1 C1D1"  # drives along cs1's edge (B1C1)
 PAST_CS2 = "D2C2 C2B2 B2A2"
@@ -28,26 +30,11 @@ def ev(
     target: float | None = 0.3,
     hold: bool = False,
 ) -> str:
-    params = {"device.battery.capacity": CAPACITY, "device.battery.chargeLevel": CAPACITY * soc}
-    if target is not None:
-        params["evcd.targetSoc"] = target
-    if hold:
-        params["evcd.hold"] = 1
-    body = "".join(f'<param key="{k}" value="{v}"/>' for k, v in params.items())
-    body += f'<route edges="{route}"/>'
-    if lot:
-        body += f'<stop parkingArea="{lot}" parking="true" duration="1000000"/>'
-    return f'<vehicle id="{vid}" type="ev" depart="{depart}" departSpeed="max">{body}</vehicle>'
+    return route_xml.ev(vid, depart, route, lot, capacity=CAPACITY, soc=soc, target=target, hold=hold)
 
 
 def car(vid: str, depart: float, route: str = PAST_CS1, stop: str = "") -> str:
-    body = f'<route edges="{route}"/>{stop}'
-    return f'<vehicle id="{vid}" type="car" depart="{depart}" departSpeed="max">{body}</vehicle>'
-
-
-def write_routes(path: Path, vehicles: list[str]) -> Path:
-    path.write_text("<routes>\n" + "\n".join(vehicles) + "\n</routes>\n", encoding="utf-8")
-    return path
+    return route_xml.car(vid, depart, route, stop)
 
 
 def make_driver(scenario, routes: Path) -> SumoDriver:
