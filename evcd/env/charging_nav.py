@@ -88,6 +88,8 @@ class ChargingNavEnv(gymnasium.Env):
             truncated as ``"stuck"``.
         day_end: where the paper protocol's simulation stops (s of day).
         max_insert_delay: seconds the target may wait for insertion before another origin is drawn.
+        gui: watch the episodes in ``sumo-gui`` (through TraCI, slow); day snapshots are still built
+            headless with libsumo.
 
     Every invalid argument raises ``ValueError`` naming it before SUMO starts. The seed is given
     through ``reset(seed=...)``: one generator drives the day, the departure, the origin and the
@@ -120,6 +122,7 @@ class ChargingNavEnv(gymnasium.Env):
         stuck_limit: float = 600.0,
         day_end: float = PAPER_DAY_END,
         max_insert_delay: float = 600.0,
+        gui: bool = False,
     ) -> None:
         self.config = EnvConfig(
             scenario=scenario, evs=evs, decision_interval=decision_interval,
@@ -127,7 +130,7 @@ class ChargingNavEnv(gymnasium.Env):
             normalize_obs=normalize_obs, protocol=protocol, charging_points=charging_points,
             demand=demand, demand_seeds=demand_seeds, route_file=route_file, cache_dir=cache_dir,
             snapshot_every=snapshot_every, step_length=step_length, time_to_teleport=time_to_teleport,
-            stuck_limit=stuck_limit, day_end=day_end, max_insert_delay=max_insert_delay,
+            stuck_limit=stuck_limit, day_end=day_end, max_insert_delay=max_insert_delay, gui=gui,
         )  # fmt: skip
         cfg = self.config
         self.scenario, self.days = cfg.load()
@@ -139,7 +142,7 @@ class ChargingNavEnv(gymnasium.Env):
         self._reward = reward_fn(cfg.reward)
         self.simulation = EpisodeSimulation(
             self.scenario, self.days, cfg.protocol, cfg.departure_window, cfg.snapshot_every,
-            cfg.cache_dir, cfg.day_end,
+            cfg.cache_dir, cfg.day_end, gui=cfg.gui,
         )  # fmt: skip
         self._episode: _Episode | None = None
         self._episodes = 0

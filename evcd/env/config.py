@@ -46,6 +46,7 @@ class EnvConfig:
     time_to_teleport: float = 300.0
     day_end: float = PAPER_DAY_END
     max_insert_delay: float = 600.0
+    gui: bool = False
     demand_config: DemandConfig = field(init=False, repr=False)
 
     def __post_init__(self) -> None:

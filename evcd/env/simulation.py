@@ -45,6 +45,7 @@ class EpisodeSimulation:
         snapshot_every: seconds between snapshots.
         cache_dir: snapshot cache root (default :func:`evcd.sim.snapshots.default_cache_dir`).
         day_end: where :meth:`finish_day` stops (paper protocol).
+        gui: run the episodes' simulation in ``sumo-gui`` through TraCI.
     """
 
     def __init__(
@@ -56,12 +57,14 @@ class EpisodeSimulation:
         snapshot_every: float,
         cache_dir: str | Path | None = None,
         day_end: float = 86_340.0,
+        gui: bool = False,
     ) -> None:
         self.scenario = scenario
         self.caches = [DayCache(spec, cache_dir) for spec in days]
         self.protocol = protocol
         self.times = snapshot_times(window, snapshot_every)
         self.day_end = day_end
+        self.gui = gui
         self.controller = ChargingController(scenario.stations)
         self._fresh_controller = self.controller.state_dict()
         self._driver: SumoDriver | None = None
@@ -141,7 +144,7 @@ class EpisodeSimulation:
 
     def _restart(self, day: int) -> None:
         self.close()
-        driver = self.caches[day].make_driver()
+        driver = self.caches[day].make_driver(gui=self.gui)
         driver.start()
         driver.add_listener(self.controller.update)
         self._driver, self._day = driver, day
