@@ -57,6 +57,8 @@ from dataclasses import dataclass, replace
 from itertools import pairwise
 from pathlib import Path
 
+from evcd.xml_files import read_xml_root
+
 log = logging.getLogger(__name__)
 
 
@@ -159,12 +161,7 @@ def read_graphml(path: str | Path) -> RoadGraph:
             without valid ``x``/``y``, or an edge naming an unknown node. The message names the file.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"GraphML file not found: {path}")
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as err:
-        raise ValueError(f"{path}: malformed XML ({err})") from err
+    root = read_xml_root(path, "GraphML file")
     if _local(root.tag) != "graphml":
         raise ValueError(f"{path}: not a GraphML file (root element <{_local(root.tag)}>)")
     ns = root.tag[: root.tag.index("}") + 1] if root.tag.startswith("{") else ""

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from evcd.atomic import atomic_write_text
+from evcd.xml_files import read_xml_root
 
 DEFAULT_POWER_W = 100_000.0
 DEFAULT_POINTS = 2
@@ -123,12 +124,7 @@ def read_stations(path: str | Path, points: int | None = None) -> list[Station]:
         ValueError: the file is not XML, has no charging stations, or a station lacks its car park.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"stations file not found: {path}")
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ValueError(f"stations file {path} is not valid XML: {exc}") from exc
+    root = read_xml_root(path, "stations file")
     lots = {pa.get("id"): pa for pa in root.iter("parkingArea")}
     stations = []
     for cs in root.iter("chargingStation"):

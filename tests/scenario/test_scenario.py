@@ -48,7 +48,7 @@ def test_missing_stations_file(scenario_copy):
 
 def test_malformed_stations_file(scenario_copy):
     (scenario_copy / STATIONS_FILE).write_text("<additional><chargingStation id='x'")
-    with pytest.raises(ValueError, match="not valid XML"):
+    with pytest.raises(ValueError, match="malformed XML"):
         load_scenario(scenario_copy)
 
 
