@@ -48,9 +48,7 @@ def plot_scenario_day(
     ax_map.add_collection(LineCollection(segs, linewidths=widths, colors="0.55"))
     colors = colormaps["tab10"](np.arange(m) % 10)
     for st, c in zip(stations, colors, strict=True):
-        x, y = sumolib.geomhelper.positionAtShapeOffset(
-            net.getLane(st.lane).getShape(), (st.start_pos + st.end_pos) / 2
-        )
+        x, y = sumolib.geomhelper.positionAtShapeOffset(net.getLane(st.lane).getShape(), st.mid_pos)
         ax_map.plot(x, y, marker="*", markersize=22, color=c, markeredgecolor="k", zorder=5)
         ax_map.annotate(f"{st.id}: {st.name}", (x, y), xytext=(8, 8), textcoords="offset points", fontsize=9,
                         bbox={"boxstyle": "round", "fc": "white", "alpha": 0.8})  # fmt: skip

@@ -4,16 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from evcd.scenario.routing import RoadGraph, distance_matrix
+from evcd.scenario.placement import station_distances
+from evcd.scenario.routing import RoadGraph
 from evcd.scenario.scenario import Scenario
 from evcd.sim.day import DayResult
 
 
 def station_distance_matrix(scenario: Scenario) -> np.ndarray:
     """Road distance (m) between the car-park midpoints of every pair of stations (row -> column)."""
-    graph = RoadGraph.from_net(scenario.net)
-    st = scenario.stations
-    return distance_matrix(graph, [s.edge for s in st], [(s.start_pos + s.end_pos) / 2 for s in st])
+    return station_distances(RoadGraph.from_net(scenario.net), scenario.stations)
 
 
 def station_table(scenario: Scenario, day: DayResult) -> list[dict]:

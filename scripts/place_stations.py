@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import sumolib
 
-from evcd.scenario.placement import Anchor, place_stations
-from evcd.scenario.routing import RoadGraph, distance_matrix
+from evcd.scenario.placement import Anchor, place_stations, station_distances
+from evcd.scenario.routing import RoadGraph
 from evcd.scenario.scenario import STATIONS_FILE, VTYPES_FILE, find_net_file
 from evcd.scenario.stations_file import write_stations
 from evcd.scenario.vtypes import write_vtypes
@@ -68,8 +68,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     write_stations(stations, out)
     write_vtypes(args.scenario / VTYPES_FILE)
-    graph = RoadGraph.from_net(net)
-    d = distance_matrix(graph, [s.edge for s in stations], [(s.start_pos + s.end_pos) / 2 for s in stations])
+    d = station_distances(RoadGraph.from_net(net), stations)
     for s, row in zip(stations, d, strict=True):
         log.info("%s %-28s %s  road m: %s", s.id, s.name, s.lane, " ".join(f"{v:6.0f}" for v in row))
     log.info("wrote %s and %s", out, args.scenario / VTYPES_FILE)

@@ -19,7 +19,7 @@ import numpy as np
 import sumolib
 
 from evcd.env.observation import RouteObserver
-from evcd.scenario.demand import DAY, DemandConfig
+from evcd.scenario.demand import DAY, DemandConfig, InverseCdf
 from evcd.scenario.routing import RoadGraph
 from evcd.scenario.stations_file import Station
 from evcd.scenario.vtypes import EV_TYPE
@@ -68,12 +68,11 @@ class OriginSampler:
         if not self.edges:
             raise ValueError("the network has no edge from which every station can be reached")
         self.lengths = np.array([graph.lengths[graph.index[e]] for e in self.edges])
-        cdf = np.cumsum(self.lengths)
-        self._cdf = cdf / cdf[-1]
+        self._sampler = InverseCdf(self.lengths)
 
     def draw(self, rng: np.random.Generator) -> tuple[str, float]:
         """An origin edge and a position on it (not within 5 % of its ends)."""
-        i = int(min(np.searchsorted(self._cdf, rng.random(), side="right"), len(self.edges) - 1))
+        i = self._sampler.draw(rng)
         length = float(self.lengths[i])
         return self.edges[i], round(float(rng.uniform(0.05, 0.95)) * length, 2)
 

@@ -123,14 +123,15 @@ class Demand:
         return [t for t in self.trips if t.station is not None]
 
 
-class _Cdf:
-    """Inverse-CDF sampling from fixed weights (one uniform draw per sample)."""
+class InverseCdf:
+    """Inverse-CDF sampling of an index from fixed weights (one uniform draw per sample)."""
 
     def __init__(self, weights: np.ndarray) -> None:
         cdf = np.cumsum(np.asarray(weights, dtype=float))
         self.cdf = cdf / cdf[-1]
 
     def draw(self, rng: np.random.Generator) -> int:
+        """An index ``i`` drawn with probability proportional to ``weights[i]``."""
         return int(min(np.searchsorted(self.cdf, rng.random(), side="right"), len(self.cdf) - 1))
 
 
@@ -156,7 +157,7 @@ class OdSampler:
         if len(self.edges) < 2:
             raise ValueError("the network has fewer than two edges usable as trip origins")
         lane_len = np.array([net.getEdge(e).getLength() * net.getEdge(e).getLaneNumber() for e in self.edges])
-        self.cdf = _Cdf(lane_len)
+        self.cdf = InverseCdf(lane_len)
         self.xy = np.array([_midpoint(net.getEdge(e)) for e in self.edges])
         self.min_trip_m = min_trip_m
         extent = float(np.hypot(*np.ptp(self.xy, axis=0)))
@@ -180,9 +181,7 @@ def _midpoint(edge: sumolib.net.edge.Edge) -> tuple[float, float]:
 
 def nearest_station_by_road(graph: RoadGraph, stations: list[Station], origins: list[str]) -> list[Station]:
     """For each origin edge, the station with the shortest driving distance to its car park."""
-    dist = np.stack(
-        [graph.distances_to(s.edge) + (s.start_pos + s.end_pos) / 2 for s in stations]
-    )  # (stations, edges)
+    dist = np.stack([graph.distances_to(s.edge) + s.mid_pos for s in stations])  # (stations, edges)
     idx = np.argmin(dist[:, [graph.index[o] for o in origins]], axis=0)
     return [stations[i] for i in idx]
 
@@ -198,7 +197,7 @@ def generate_demand(net: sumolib.net.Net, stations: list[Station], config: Deman
         if st.edge not in graph:
             raise ValueError(f"station {st.id!r} sits on edge {st.edge!r}, which is not a drivable edge")
     sampler = OdSampler(net, graph, config.min_trip_m)
-    hours = _Cdf(np.asarray(config.hourly_profile))
+    hours = InverseCdf(np.asarray(config.hourly_profile))
     trips: list[Trip] = []
 
     def depart(rng: np.random.Generator) -> float:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import sumolib
 
-from evcd.scenario.routing import RoadGraph
+from evcd.scenario.routing import RoadGraph, distance_matrix
 from evcd.scenario.stations_file import DEFAULT_LOT_CAPACITY, DEFAULT_POINTS, DEFAULT_POWER_W, Station
 
 log = logging.getLogger(__name__)
@@ -159,6 +159,11 @@ def place_stations(
         stations.append(_station_on(net, pool[c], f"cs{i}", name, points, power_w))
     log.info("placed %d stations, min pairwise road distance %.0f m", k, _min_pair(pair, chosen))
     return stations
+
+
+def station_distances(graph: RoadGraph, stations: Sequence[Station]) -> np.ndarray:
+    """Road distance (m) between the car-park midpoints of every pair of stations (row -> column)."""
+    return distance_matrix(graph, [s.edge for s in stations], [s.mid_pos for s in stations])
 
 
 def _min_pair(pair: np.ndarray, chosen: list[int]) -> float:

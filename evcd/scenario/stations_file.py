@@ -53,6 +53,11 @@ class Station:
         """The SUMO edge id of the station's lane."""
         return self.lane.rsplit("_", 1)[0]
 
+    @property
+    def mid_pos(self) -> float:
+        """Middle of the car park along the lane (m): where station distances are measured to."""
+        return (self.start_pos + self.end_pos) / 2
+
     def __post_init__(self) -> None:
         if not self.parking_area:
             object.__setattr__(self, "parking_area", f"pa_{self.id}")
