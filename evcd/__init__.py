@@ -1,5 +1,16 @@
-"""evcd: deep reinforcement learning for electric-vehicle charging dispatch on SUMO."""
+"""evcd: deep reinforcement learning for electric-vehicle charging dispatch on SUMO.
+
+Importing :mod:`evcd` registers the Gymnasium id ``evcd/ChargingNav-v0`` by its string entry point,
+so that importing any module of the package (say :mod:`evcd.sim.snapshots`) does not pull in the
+environment layer; ``gymnasium.make`` imports it when the environment is made.
+"""
+
+import gymnasium
 
 __version__ = "0.1.0"
 
-from evcd import env as env  # registers evcd/ChargingNav-v0 with Gymnasium
+#: The Gymnasium id of :class:`evcd.env.ChargingNavEnv`.
+ENV_ID = "evcd/ChargingNav-v0"
+
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(id=ENV_ID, entry_point="evcd.env.charging_nav:ChargingNavEnv")

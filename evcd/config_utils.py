@@ -55,3 +55,35 @@ def env_kwargs(cfg: DictConfig) -> dict[str, Any]:
         kwargs["demand"] = demand_config(cfg)
         kwargs["evs"] = int(cfg.evs)
     return kwargs
+
+
+def check_integer(value: Any, key: str, minimum: int) -> int:
+    """``value`` if it is an integer >= ``minimum``.
+
+    Raises:
+        ValueError: naming ``key``, the value and what is allowed.
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{key}={value!r}: must be an integer >= {minimum}")
+    return value
+
+
+def agent_params(cfg: DictConfig) -> tuple[str, dict[str, Any]]:
+    """The agent's registry name and constructor arguments from ``agent`` (and, for learning agents,
+    the top-level ``learner`` block, which the ``agent`` keys override).
+
+    Raises:
+        ValueError: the agent name is unknown (the message lists the known ones).
+    """
+    from evcd.agents import agent_class
+
+    params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
+    name = str(params.pop("name"))
+    cls = agent_class(name)
+    learner = OmegaConf.select(cfg, "learner")
+    if cls.learns and learner is not None:
+        params = {**OmegaConf.to_container(learner, resolve=True), **params}
+    for key, value in params.items():
+        if isinstance(value, list) and key == "hidden":
+            params[key] = tuple(value)
+    return name, params

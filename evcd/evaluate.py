@@ -5,14 +5,18 @@
     write_results_json(result, run_dir / "results.json", config=...)
 
 Seeds: everything derives from the run seed through ``numpy.random.SeedSequence`` spawn keys, so an
-episode depends only on ``(seed, i)``, never on the episodes run before it:
+episode depends only on ``(seed, stream, i)``, never on the episodes run before it:
 
-- episode ``i``: ``SeedSequence(seed, spawn_key=(0, i))`` gives the ``env.reset`` seed and the
-  generator handed to ``agent.begin_episode`` (see :func:`episode_seed`);
-- the bootstrap: ``SeedSequence(seed, spawn_key=(1,))``.
+- evaluation episode ``i``: ``SeedSequence(seed, spawn_key=(0, i))`` gives the ``env.reset`` seed
+  and the generator handed to ``agent.begin_episode`` (see :func:`episode_spec`);
+- the bootstrap: ``SeedSequence(seed, spawn_key=(1,))``; the agent's own generator in the scripts:
+  ``spawn_key=(2,)``; training episodes (:mod:`evcd.train`): ``spawn_key=(3, i)``, a stream disjoint
+  from the evaluation episodes'.
 
-Only episodes that end by charging (``terminated``) enter the travel-time statistics; truncated ones
-are counted and listed. The agent never learns here: :meth:`Agent.observe` is not called.
+Episodes are played by a runner (:mod:`evcd.env.runner`); :func:`evaluate` also takes a plain
+environment. Only episodes that end by charging (``terminated``) enter the travel-time statistics;
+truncated ones are counted and listed. The agent never learns here: :meth:`Agent.observe` is not
+called.
 """
 
 from __future__ import annotations
@@ -23,7 +27,6 @@ import io
 import json
 import logging
 import math
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,49 +38,16 @@ from tqdm import tqdm
 
 from evcd.agents.base import Agent
 from evcd.atomic import atomic_write_text
+from evcd.env.runner import EpisodeRow, EpisodeRunner, EpisodeSpec, SingleEnvRunner
 
 log = logging.getLogger(__name__)
 
 BOOTSTRAP_RESAMPLES = 10_000
-_EPISODE_KEY = 0
-_BOOTSTRAP_KEY = 1
-
-
-@dataclass(frozen=True)
-class EpisodeRow:
-    """One evaluated episode (a row of ``episodes.csv``).
-
-    Attributes:
-        episode: index in the run (0-based).
-        seed: the ``env.reset`` seed (reproduces the target and the background day).
-        departure: the target's departure (s of day).
-        origin: the target's origin edge.
-        day: the background day's demand seed.
-        choices: the action of every slot, joined by ``-`` (e.g. ``"2-2-4"``).
-        station: the station index the target ended at (last choice).
-        station_id: that station's id.
-        travel_time: seconds from departure to the start of charging (to the end if truncated).
-        queue_wait: seconds the target waited in car parks.
-        reason: why the episode ended (``"charging"`` or a truncation reason of the env).
-        truncated: the episode ended without charging.
-        episode_return: sum of the rewards.
-        wall_s: wall-clock seconds of the episode (reset included).
-    """
-
-    episode: int
-    seed: int
-    departure: float
-    origin: str
-    day: int
-    choices: str
-    station: int
-    station_id: str
-    travel_time: float
-    queue_wait: float
-    reason: str
-    truncated: bool
-    episode_return: float
-    wall_s: float
+#: Spawn keys of the seed streams (see the module docstring).
+EVAL_STREAM = 0
+BOOTSTRAP_STREAM = 1
+AGENT_STREAM = 2
+TRAIN_STREAM = 3
 
 
 @dataclass(frozen=True)
@@ -122,16 +92,32 @@ class EvalResult:
 
 
 # ---------------------------------------------------------------------------------------- seeds
-def episode_seed(seed: int, episode: int) -> tuple[int, np.random.Generator]:
-    """The ``env.reset`` seed and the agent's generator of episode ``episode`` of run ``seed``."""
-    env_ss, agent_ss = np.random.SeedSequence(seed, spawn_key=(_EPISODE_KEY, episode)).spawn(2)
+def episode_spec(seed: int, episode: int, stream: int = EVAL_STREAM) -> EpisodeSpec:
+    """Episode ``episode`` of stream ``stream`` of run ``seed`` (its reset seed and agent seed)."""
+    env_ss, agent_ss = np.random.SeedSequence(seed, spawn_key=(stream, episode)).spawn(2)
     reset_seed = int(env_ss.generate_state(1, dtype=np.uint64)[0] >> np.uint64(1))  # fits int64
-    return reset_seed, np.random.default_rng(agent_ss)
+    return EpisodeSpec(int(episode), reset_seed, agent_ss)
+
+
+def episode_specs(seed: int, indices: Sequence[int] | range, stream: int = EVAL_STREAM) -> list[EpisodeSpec]:
+    """:func:`episode_spec` for each index."""
+    return [episode_spec(seed, i, stream) for i in indices]
+
+
+def episode_seed(seed: int, episode: int, stream: int = EVAL_STREAM) -> tuple[int, np.random.Generator]:
+    """The ``env.reset`` seed and the agent's generator of episode ``episode`` of run ``seed``."""
+    spec = episode_spec(seed, episode, stream)
+    return spec.reset_seed, spec.agent_rng()
 
 
 def bootstrap_rng(seed: int) -> np.random.Generator:
     """The generator of a run's bootstrap."""
-    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_BOOTSTRAP_KEY,)))
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(BOOTSTRAP_STREAM,)))
+
+
+def agent_rng(seed: int) -> np.random.Generator:
+    """The generator a script builds its agent with (network initialisation, replay sampling)."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(AGENT_STREAM,)))
 
 
 def _check_seed(seed: Any) -> int:
@@ -207,57 +193,78 @@ def summarize(
 
 
 # ---------------------------------------------------------------------------------------- the loop
+def as_runner(env_or_runner: gymnasium.Env | EpisodeRunner) -> EpisodeRunner:
+    """``env_or_runner`` if it is a runner, else a :class:`SingleEnvRunner` over the environment."""
+    if isinstance(env_or_runner, EpisodeRunner):
+        return env_or_runner
+    return SingleEnvRunner(env_or_runner)
+
+
 def run_episode(
     env: gymnasium.Env, agent: Agent, episode: int, seed: int, explore: bool = False
 ) -> EpisodeRow:
     """Run episode ``episode`` of run ``seed`` to its end; return its row."""
-    reset_seed, agent_rng = episode_seed(seed, episode)
-    t0 = time.perf_counter()
-    obs, info = env.reset(seed=reset_seed)
-    agent.begin_episode(agent_rng)
-    choices: list[int] = []
-    total = 0.0
-    terminated = truncated = False
-    while not (terminated or truncated):
-        action = agent.act(obs, explore=explore)
-        choices.append(action)
-        obs, reward, terminated, truncated, info = env.step(action)
-        total += float(reward)
-    return EpisodeRow(
-        episode=episode,
-        seed=reset_seed,
-        departure=float(info["departure"]),
-        origin=str(info.get("origin", "")),
-        day=int(info.get("day", -1)),
-        choices="-".join(map(str, choices)),
-        station=-1 if info.get("station") is None else int(info["station"]),
-        station_id=str(info.get("station_id", "")),
-        travel_time=float(info["travel_time"]),
-        queue_wait=float(info["queue_wait"]),
-        reason=str(info["reason"]),
-        truncated=bool(truncated and not terminated),
-        episode_return=total,
-        wall_s=time.perf_counter() - t0,
-    )
+    return SingleEnvRunner(env).episode(episode_spec(seed, episode), agent, explore=explore, learn=False)
+
+
+class EpisodeProgress:
+    """A tqdm bar over episodes showing the running mean travel time (and the truncated count).
+
+    Args:
+        total: episodes expected.
+        desc: the bar's label.
+        enabled: show it (on stderr).
+        initial: episodes already done (a resumed run).
+        window: the mean covers the latest ``window`` charged episodes (``None``: all).
+    """
+
+    def __init__(
+        self, total: int, desc: str, enabled: bool = True, initial: int = 0, window: int | None = None
+    ) -> None:
+        self.bar = tqdm(
+            total=total, initial=initial, desc=desc, unit="ep", mininterval=2, disable=not enabled
+        )
+        self.window = window
+        self.travel: list[float] = []
+        self.truncated = 0
+
+    def __call__(self, row: EpisodeRow) -> None:
+        """Count ``row`` (use the instance as a runner's ``on_episode``)."""
+        if row.truncated:
+            self.truncated += 1
+        else:
+            self.travel.append(row.travel_time)
+        recent = self.travel[-self.window :] if self.window else self.travel
+        self.bar.set_postfix(mean_T=f"{np.mean(recent):.0f}s" if recent else "-", truncated=self.truncated,
+                             refresh=False)  # fmt: skip
+        self.bar.update(1)
+
+    def close(self) -> None:
+        """Close the bar."""
+        self.bar.close()
 
 
 def evaluate(
-    env: gymnasium.Env,
+    env: gymnasium.Env | EpisodeRunner,
     agent: Agent,
     episodes: int,
     seed: int,
     progress: bool = True,
     resamples: int = BOOTSTRAP_RESAMPLES,
+    specs: Sequence[EpisodeSpec] | None = None,
 ) -> EvalResult:
-    """Run ``agent`` for ``episodes`` episodes of ``env``, without exploration or learning.
+    """Run ``agent`` for ``episodes`` episodes, without exploration or learning.
 
     Args:
-        env: a :class:`~evcd.env.ChargingNavEnv` (or any env with its ``info`` keys).
+        env: a :class:`~evcd.env.ChargingNavEnv` (or any env with its ``info`` keys), or a runner
+            (:mod:`evcd.env.runner`). It is not closed here.
         agent: the dispatcher.
         episodes: number of episodes (>= 1).
         seed: the run seed (>= 0); see the module docstring for what derives from it.
         progress: show a tqdm progress bar (on stderr).
         resamples: bootstrap resamples of the confidence interval.
+        specs: the episodes to run (default: the first ``episodes`` of the evaluation stream of
+            ``seed``); ``episodes`` must equal their number.
 
     Raises:
         ValueError: ``episodes`` or ``seed`` out of range.
@@ -265,19 +272,17 @@ def evaluate(
     if isinstance(episodes, bool) or not isinstance(episodes, int | np.integer) or episodes < 1:
         raise ValueError(f"episodes={episodes!r}: must be an integer >= 1")
     seed = _check_seed(seed)
-    rows: list[EpisodeRow] = []
-    bar = tqdm(
-        range(int(episodes)), desc=f"evaluate {agent.name}", unit="ep", mininterval=2, disable=not progress
-    )
-    for i in bar:
-        row = run_episode(env, agent, i, seed)
-        rows.append(row)
-        log.debug("episode %d: %s", i, row)
-        done = [r.travel_time for r in rows if not r.truncated]
-        bar.set_postfix(
-            mean_T=f"{np.mean(done):.0f}s" if done else "-", truncated=len(rows) - len(done), refresh=False
-        )
-    bar.close()
+    if specs is None:
+        specs = episode_specs(seed, range(int(episodes)))
+    elif len(specs) != episodes:
+        raise ValueError(f"episodes={episodes} but {len(specs)} specs given")
+    bar = EpisodeProgress(len(specs), f"evaluate {agent.name}", progress)
+    try:
+        rows = as_runner(env).run(specs, agent, explore=False, learn=False, on_episode=bar)
+    finally:
+        bar.close()
+    for row in rows:
+        log.debug("episode %d: %s", row.episode, row)
     summary = summarize(rows, bootstrap_rng(seed), resamples)
     return EvalResult(agent=agent.name, seed=seed, rows=tuple(rows), summary=summary)
 
@@ -299,6 +304,24 @@ def episodes_csv_text(rows: Sequence[EpisodeRow]) -> str:
     for row in rows:
         writer.writerow(dataclasses.asdict(row))
     return buf.getvalue()
+
+
+def read_episodes_csv(path: str | Path) -> list[EpisodeRow]:
+    """The rows of an ``episodes.csv`` (or ``train_episodes.csv``) written by :func:`episodes_csv_text`.
+
+    Raises:
+        ValueError: the file lacks a column of :class:`EpisodeRow` (the message names the file).
+    """
+    types = {f.name: f.type for f in dataclasses.fields(EpisodeRow)}
+    convert = {"int": int, "float": float, "str": str, "bool": lambda v: v == "True"}
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        missing = [k for k in CSV_FIELDS if k not in (reader.fieldnames or ()) and k != "switches"]
+        if missing:
+            raise ValueError(f"{path}: not an episodes file (missing columns {missing})")
+        return [
+            EpisodeRow(**{k: convert[types[k]](v) for k, v in row.items() if k in types}) for row in reader
+        ]
 
 
 def write_episodes_csv(result: EvalResult, path: str | Path, overwrite: bool = False) -> Path:

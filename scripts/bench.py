@@ -3,6 +3,10 @@
     python scripts/bench.py                 # Jurong West, 400 EVs: ~25 min on 2 cores
     python scripts/bench.py --quick         # ends within about a minute (numbers are indicative)
     python scripts/bench.py --equivalence 50 --out equivalence.json   # fast vs paper |dT| only
+    python scripts/bench.py --suite replay   # replay buffer only: sample + priority update (seconds)
+
+Every run also times the prioritized replay buffer: ``replay_batch_us`` (sample a batch of 32 from
+10,000 transitions and update its priorities) and ``per_sample_update_us`` (the same per transition).
 
 ``--equivalence N`` runs N greedy episodes (departures 05:00-07:00) under both protocols and reports
 ``|T_fast - T_paper|``; the paper runs stop at charge start (``day_end=0``: what happens after the
@@ -24,6 +28,7 @@ from pathlib import Path
 from evcd.atomic import atomic_write_text
 from evcd.bench import run_bench
 from evcd.env.equivalence import compare_protocols
+from evcd.replay_bench import time_replay
 from evcd.scenario.demand import DemandConfig
 from evcd.scenario.scenario import JURONG_WEST
 
@@ -42,6 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
+    p.add_argument("--suite", choices=("env", "replay"), default="env",
+                   help="env (default): episodes, SUMO, replay; replay: the replay buffer alone")  # fmt: skip
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     if args.evs < 0 or args.fast_episodes < 1 or args.paper_episodes < 0:
@@ -51,6 +58,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.out.exists() and not args.force:
         log.error("%s exists; pass --force to replace it", args.out)
         return 2
+    replay = time_replay()
+    log.info("replay buffer: %.1f us per batch of 32 (sample + priority update), %.2f us per transition",
+             replay["replay_batch_us"], replay["per_sample_update_us"])  # fmt: skip
+    replay_summary = {**replay, "goals": {"replay_batch_us": "<= 100"}}
+    if args.suite == "replay":
+        atomic_write_text(args.out, json.dumps({"summary": replay_summary}, indent=1))
+        log.info("wrote %s", args.out)
+        return 0
     env_kwargs: dict = {"scenario": args.scenario, "evs": args.evs}
     if args.equivalence:
         window = (5 * 3600.0, 7 * 3600.0)
@@ -77,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    summary = result.summary()
+    summary = {**result.summary(), **replay}
+    summary["goals"] = {**summary["goals"], **replay_summary["goals"]}
     report = {
         "summary": summary,
         "quick": args.quick,

@@ -3,6 +3,7 @@
     python scripts/evaluate.py agent=greedy evs=400 episodes=50 seed=0
     python scripts/evaluate.py -m agent=random,greedy,queue_aware evs=200,300,400 seed=0,1,2
     python scripts/evaluate.py agent=random env.departure_window=[25200,32400]   # morning only
+    python scripts/evaluate.py agent=dueling_ddqn agent.checkpoint=outputs/train/<run>   # a trained policy
 
 Writes ``episodes.csv`` (one row per episode) and ``results.json`` (summary, rows, config) into the
 Hydra run directory and logs the summary: mean, median and 95% bootstrap interval of the mean
@@ -18,14 +19,16 @@ from pathlib import Path
 from typing import Any
 
 import hydra
-import numpy as np
 from hydra.core.hydra_config import HydraConfig
+from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class, make_agent_for_env
-from evcd.config_utils import env_kwargs
+from evcd.agents.dqn import checkpoint_agent_config
+from evcd.checkpoint import CheckpointError
+from evcd.config_utils import agent_params, check_integer, env_kwargs
 from evcd.env import ChargingNavEnv
-from evcd.evaluate import evaluate, write_episodes_csv, write_results_json
+from evcd.evaluate import agent_rng, evaluate, write_episodes_csv, write_results_json
 from evcd.scenario_report import format_table
 
 log = logging.getLogger("evaluate")
@@ -34,29 +37,25 @@ EPISODES_CSV = "episodes.csv"
 RESULTS_JSON = "results.json"
 
 
-def _integer(cfg: DictConfig, key: str, minimum: int) -> int:
-    value = cfg[key]
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ValueError(f"{key}={value!r}: must be an integer >= {minimum}")
-    return value
-
-
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     """Evaluate the agent described by ``cfg``; write its files into ``out_dir``; return the summary."""
     # every check before SUMO starts
-    episodes = _integer(cfg, "episodes", 1)
-    seed = _integer(cfg, "seed", 0)
-    resamples = _integer(cfg, "bootstrap_resamples", 1)
-    params = OmegaConf.to_container(cfg.agent, resolve=True)
-    name = params.pop("name")
-    agent_class(name)  # unknown agent -> ValueError listing the known ones
+    episodes = check_integer(cfg.episodes, "episodes", 1)
+    seed = check_integer(cfg.seed, "seed", 0)
+    resamples = check_integer(cfg.bootstrap_resamples, "bootstrap_resamples", 1)
+    name, params = agent_params(cfg)  # unknown agent -> ValueError listing the known ones
+    if agent_class(name).learns:
+        if params.get("checkpoint") is None:
+            raise ValueError(f"agent {name!r} learns: give the trained policy with agent.checkpoint=PATH "
+                             "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
+        params["checkpoint"] = to_absolute_path(str(params["checkpoint"]))
+        params = {**checkpoint_agent_config(params["checkpoint"]), **params}
     files = [out_dir / EPISODES_CSV, out_dir / RESULTS_JSON]
     for path in files:
         if path.exists():
             raise FileExistsError(f"{path} exists: evaluate into a fresh run directory")
     env = ChargingNavEnv(**env_kwargs(cfg))  # validates every env value; loads the scenario, no SUMO
-    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(2,)))  # the agent's own
-    agent = make_agent_for_env(name, env, rng, **params)
+    agent = make_agent_for_env(name, env, agent_rng(seed), **params)
     log.info("%s on %s, evs=%s, %d episodes, seed %d", agent, env.scenario.root, cfg.evs, episodes, seed)
 
     try:
@@ -90,7 +89,7 @@ def main(cfg: DictConfig) -> float:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     try:
         return run(cfg, out_dir)["mean_travel_time"]
-    except (ValueError, FileNotFoundError, FileExistsError) as exc:
+    except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
         log.error("%s", exc)
         sys.exit(2)
 

@@ -42,3 +42,15 @@ def test_bench_script_refuses_to_overwrite(tmp_path):
     )  # fmt: skip
     assert proc.returncode == 2 and "exists" in proc.stderr
     assert out.read_text() == "{}"
+
+
+def test_bench_script_times_the_replay_buffer(tmp_path):
+    out = tmp_path / "bench.json"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "bench.py"), "--suite", "replay", "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads(out.read_text())["summary"]
+    assert 0 < summary["per_sample_update_us"] < summary["replay_batch_us"]
+    assert summary["goals"]["replay_batch_us"] == "<= 100"

@@ -2,9 +2,11 @@
 
     rng = np.random.default_rng(seed)
     agent = make_agent("greedy", n_stations=5, rng=rng)      # or make_agent_for_env("greedy", env, rng)
+    agent = make_agent("dueling_ddqn", 5, rng, lr=1e-3)      # DQNAgent(double=True, dueling=True)
 
-The registry maps a name to a class path and imports it on first use, so that the heuristics do not
-pay for torch when learning agents join it.
+The registry maps a name to a class path (imported on first use, so that the heuristics do not pay
+for torch) and to the defaults that name implies: ``dqn`` and ``dueling_ddqn`` are the one
+:class:`~evcd.agents.dqn.DQNAgent` with its two switches off or on.
 """
 
 from __future__ import annotations
@@ -17,11 +19,13 @@ import numpy as np
 
 from evcd.agents.base import Agent, Transition, split_observation
 
-#: Agent name -> ``module:Class``.
-_REGISTRY: dict[str, str] = {
-    "random": "evcd.agents.heuristics:RandomAgent",
-    "greedy": "evcd.agents.heuristics:GreedyAgent",
-    "queue_aware": "evcd.agents.heuristics:QueueAwareAgent",
+#: Agent name -> (``module:Class``, the constructor arguments that name implies).
+_REGISTRY: dict[str, tuple[str, dict[str, Any]]] = {
+    "random": ("evcd.agents.heuristics:RandomAgent", {}),
+    "greedy": ("evcd.agents.heuristics:GreedyAgent", {}),
+    "queue_aware": ("evcd.agents.heuristics:QueueAwareAgent", {}),
+    "dqn": ("evcd.agents.dqn:DQNAgent", {"double": False, "dueling": False}),
+    "dueling_ddqn": ("evcd.agents.dqn:DQNAgent", {"double": True, "dueling": True}),
 }
 AGENT_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 
@@ -34,8 +38,14 @@ def agent_class(name: str) -> type[Agent]:
     """
     if name not in _REGISTRY:
         raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(AGENT_NAMES)}")
-    module, _, cls_name = _REGISTRY[name].partition(":")
+    module, _, cls_name = _REGISTRY[name][0].partition(":")
     return getattr(importlib.import_module(module), cls_name)
+
+
+def agent_defaults(name: str) -> dict[str, Any]:
+    """The constructor arguments the name ``name`` implies (e.g. ``dueling_ddqn``: both switches on)."""
+    agent_class(name)
+    return dict(_REGISTRY[name][1])
 
 
 def _check_kwargs(cls: type[Agent], name: str, kwargs: dict[str, Any]) -> None:
@@ -53,7 +63,7 @@ def make_agent(name: str, n_stations: int, rng: np.random.Generator, **kwargs: A
     """
     cls = agent_class(name)
     _check_kwargs(cls, name, kwargs)
-    return cls(n_stations, rng, **kwargs)
+    return cls(n_stations, rng, **{**agent_defaults(name), **kwargs})
 
 
 def make_agent_for_env(name: str, env: Any, rng: np.random.Generator, **kwargs: Any) -> Agent:
@@ -61,7 +71,7 @@ def make_agent_for_env(name: str, env: Any, rng: np.random.Generator, **kwargs: 
     ``env`` (a :class:`~evcd.env.ChargingNavEnv`, wrapped or not); ``kwargs`` override them."""
     cls = agent_class(name)
     _check_kwargs(cls, name, kwargs)
-    return cls.from_env(env, rng, **kwargs)
+    return cls.from_env(env, rng, **{**agent_defaults(name), **kwargs})
 
 
 __all__ = [
@@ -69,6 +79,7 @@ __all__ = [
     "Agent",
     "Transition",
     "agent_class",
+    "agent_defaults",
     "make_agent",
     "make_agent_for_env",
     "split_observation",

@@ -1,7 +1,8 @@
-"""The agent interface shared by the dispatchers: heuristics now, learning agents (DQN) next.
+"""The agent interface shared by the dispatchers: heuristics and learning agents (DQN).
 
 An agent maps the environment's observation ``[D, N, Z]`` (see :mod:`evcd.env.observation`) to a
-station index. The loop that drives it (:func:`evcd.evaluate.evaluate`, the trainer) calls
+station index. The runner that drives it (:mod:`evcd.env.runner`, for the trainer and the
+evaluation) calls
 
     agent.begin_episode(rng)              # after env.reset(): forget the last episode
     action = agent.act(obs, explore)      # once per decision slot
@@ -14,24 +15,11 @@ replaced per episode), never the global one, so a run is reproducible from its s
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar, NamedTuple, Self
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
-
-class Transition(NamedTuple):
-    """One environment step, as a learning agent sees it.
-
-    ``terminated`` and ``truncated`` are kept apart: a time-limit end (truncation) still bootstraps
-    from ``next_obs``, a charge start (termination) does not.
-    """
-
-    obs: np.ndarray
-    action: int
-    reward: float
-    next_obs: np.ndarray
-    terminated: bool
-    truncated: bool
+from evcd.env.runner import Transition
 
 
 def split_observation(obs: np.ndarray, n_stations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -61,6 +49,8 @@ class Agent(ABC):
     """
 
     name: ClassVar[str]
+    #: Whether the agent learns from :meth:`observe` (the trainer runs a training phase for it).
+    learns: ClassVar[bool] = False
 
     def __init__(self, n_stations: int, rng: np.random.Generator) -> None:
         if isinstance(n_stations, bool) or not isinstance(n_stations, int | np.integer) or n_stations < 1:
@@ -99,8 +89,18 @@ class Agent(ABC):
             explore: whether a learning agent may explore (training); heuristics ignore it.
         """
 
+    def act_batch(self, obs: np.ndarray, explore: bool = False) -> np.ndarray:
+        """:meth:`act` for observations ``(k, 3m)`` of ``k`` targets due at the same time (a runner
+        that co-simulates episodes may call it); agents with a network override it with one
+        forward pass. This default calls :meth:`act` row by row."""
+        return np.array([self.act(o, explore) for o in np.asarray(obs)], dtype=np.int64)
+
     def observe(self, transition: Transition) -> None:  # noqa: B027  (a hook: no-op by default)
         """Learning hook, called after every step while training; the heuristics ignore it."""
+
+    def stats(self) -> dict[str, float]:
+        """Learning statistics for logs (cumulative counters and current schedules); none here."""
+        return {}
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(n_stations={self.n_stations})"

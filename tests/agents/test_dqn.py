@@ -1,0 +1,985 @@
+"""DQNAgent mechanics with real torch networks: the registry's switches, the DQN and Double DQN
+targets checked by hand (terminated vs truncated), epsilon-greedy exploration (slot and episode),
+when and how it learns (learning_starts, train_freq, gradient_steps, hard and soft target updates,
+priorities, importance weights, MSE / Huber, gradient clipping, reward and observation scaling),
+validation, state round trips (in memory and through checkpoint files), determinism and the absence
+of global random state."""
+
+from __future__ import annotations
+
+import copy
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+from evcd.agents import make_agent, make_agent_for_env
+from evcd.agents.base import Transition
+from evcd.agents.dqn import (
+    STATE_FORMAT,
+    DQNAgent,
+    DQNConfig,
+    checkpoint_agent_config,
+    linear_schedule,
+    observation_scale,
+)
+from evcd.agents.networks import DuelingQNetwork, QNetwork
+from evcd.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from evcd.env.runner import SingleEnvRunner
+from evcd.evaluate import TRAIN_STREAM, episode_specs
+from tests.agents.toy_env import ToyDispatchEnv
+
+M = 3  # stations
+OBS_DIM = 3 * M
+SMALL = {"hidden": (16, 16), "batch_size": 8, "buffer_size": 64}
+
+
+@pytest.fixture(autouse=True)
+def _torch_globals():
+    """One thread (tiny networks: faster); ``load_state_dict`` sets torch's global generator: put both
+    back after every test."""
+    state, threads = torch.random.get_rng_state(), torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+    torch.random.set_rng_state(state)
+
+
+def _agent(seed: int = 0, n_stations: int = M, **kwargs) -> DQNAgent:
+    return DQNAgent(n_stations, np.random.default_rng(seed), **{**SMALL, **kwargs})
+
+
+def _obs(rng: np.random.Generator, n: int | None = None, dim: int = OBS_DIM) -> np.ndarray:
+    shape = (dim,) if n is None else (n, dim)
+    return rng.uniform(0.0, 5.0, size=shape).astype(np.float32)
+
+
+def _transition(rng, terminated=False, truncated=False, reward=None, n_stations=M) -> Transition:
+    dim = 3 * n_stations
+    return Transition(
+        _obs(rng, dim=dim),
+        int(rng.integers(n_stations)),
+        float(rng.uniform(-3.0, 3.0) if reward is None else reward),
+        _obs(rng, dim=dim),
+        terminated,
+        truncated,
+    )
+
+
+def _transitions(seed: int, n: int, n_stations: int = M) -> list[Transition]:
+    rng = np.random.default_rng(seed)
+    return [_transition(rng, terminated=bool(rng.random() < 0.3), n_stations=n_stations) for _ in range(n)]
+
+
+def _params(net: torch.nn.Module) -> list[torch.Tensor]:
+    return [p.detach().clone() for p in net.parameters()]
+
+
+def _equal(a: list[torch.Tensor], b: list[torch.Tensor]) -> bool:
+    return len(a) == len(b) and all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+def _perturb(net: torch.nn.Module, seed: int, scale: float = 0.5) -> None:
+    gen = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(scale * torch.randn(p.shape, generator=gen))
+
+
+def _head(net: torch.nn.Module) -> torch.nn.Linear:
+    return net.advantage if isinstance(net, DuelingQNetwork) else net.head
+
+
+def _set_head_bias(net: torch.nn.Module, bias: list[float]) -> None:
+    """Q(s, .) = ``bias`` for the plain network, ``bias - mean(bias)`` for the dueling one."""
+    with torch.no_grad():
+        head = _head(net)
+        head.weight.zero_()
+        head.bias.copy_(torch.tensor(bias))
+        if isinstance(net, DuelingQNetwork):
+            net.value.weight.zero_()
+            net.value.bias.zero_()
+
+
+def _np_state_equal(a, b) -> bool:
+    return a[0] == b[0] and np.array_equal(a[1], b[1]) and tuple(a[2:]) == tuple(b[2:])
+
+
+def _state_equal(a, b) -> bool:
+    """Deep equality of state dicts (tensors with torch.equal, arrays with array_equal)."""
+    if isinstance(a, torch.Tensor):
+        return isinstance(b, torch.Tensor) and a.dtype == b.dtype and torch.equal(a, b)
+    if isinstance(a, np.ndarray):
+        return np.array_equal(a, np.asarray(b))
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_state_equal(a[k], b[k]) for k in a)
+    if isinstance(a, list | tuple):
+        return len(a) == len(b) and all(_state_equal(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, float) and math.isnan(a):
+        return isinstance(b, float) and math.isnan(b)
+    return a == b
+
+
+def _train(agent: DQNAgent, seed: int, episodes: range, explore: bool = True) -> list:
+    runner = SingleEnvRunner(ToyDispatchEnv())
+    return runner.run(episode_specs(seed, episodes, TRAIN_STREAM), agent, explore=explore, learn=True)
+
+
+# -- registry and switches ------------------------------------------------------------------------------
+
+
+def test_registry_names_imply_the_switches():
+    dqn = make_agent("dqn", M, np.random.default_rng(0), hidden=[8])
+    ddqn = make_agent("dueling_ddqn", M, np.random.default_rng(0), hidden=[8])
+    assert type(dqn) is DQNAgent
+    assert type(ddqn) is DQNAgent
+    assert (dqn.config.double, dqn.config.dueling) == (False, False)
+    assert (ddqn.config.double, ddqn.config.dueling) == (True, True)
+    assert type(dqn.online) is QNetwork
+    assert type(dqn.target) is QNetwork
+    assert type(ddqn.online) is DuelingQNetwork
+    assert type(ddqn.target) is DuelingQNetwork
+    assert dqn.name == "dqn"
+    assert ddqn.name == "dueling_ddqn"
+    assert dqn.learns
+    assert ddqn.learns
+    # the switches, not the registry key, decide the name
+    assert make_agent("dqn", M, np.random.default_rng(0), hidden=[8], double=True).name == "ddqn"
+    assert DQNAgent(M, np.random.default_rng(0), hidden=[8], dueling=True).name == "dueling_dqn"
+
+
+def test_make_agent_rejects_unknown_options():
+    with pytest.raises(ValueError, match="bogus_option"):
+        make_agent("dqn", M, np.random.default_rng(0), bogus_option=1)
+
+
+def test_target_network_starts_as_a_frozen_copy():
+    agent = _agent()
+    assert _equal(_params(agent.online), _params(agent.target))
+    assert all(not p.requires_grad for p in agent.target.parameters())
+    assert all(p.requires_grad for p in agent.online.parameters())
+    assert agent.online is not agent.target
+
+
+# -- TD targets -----------------------------------------------------------------------------------------
+
+
+def _batch(seed: int, n: int = 16):
+    rng = np.random.default_rng(seed)
+    rewards = torch.from_numpy(rng.uniform(-2, 2, n).astype(np.float32))
+    next_obs = torch.from_numpy(_obs(rng, n))
+    terminated = torch.from_numpy((rng.random(n) < 0.4).astype(np.float32))
+    assert 0 < terminated.sum() < n
+    return rewards, next_obs, terminated
+
+
+@pytest.mark.parametrize("dueling", [False, True])
+def test_double_target_by_hand(dueling):
+    agent = _agent(double=True, dueling=dueling, hidden=(8, 8), gamma=0.9)
+    _perturb(agent.target, seed=1)
+    rewards, next_obs, terminated = _batch(2)
+    with torch.no_grad():
+        q_online, q_target = agent.online(next_obs), agent.target(next_obs)
+    best = q_online.argmax(dim=1)
+    expected = rewards + 0.9 * (1 - terminated) * q_target[torch.arange(16), best]
+    torch.testing.assert_close(agent.td_targets(rewards, next_obs, terminated), expected)
+    # the online and target networks really disagree here, so the choice of network matters
+    assert not torch.allclose(q_online, q_target)
+
+
+@pytest.mark.parametrize("dueling", [False, True])
+def test_plain_target_is_the_max_of_the_target_network(dueling):
+    agent = _agent(double=False, dueling=dueling, hidden=(8, 8), gamma=0.8)
+    _perturb(agent.target, seed=3)
+    rewards, next_obs, terminated = _batch(4)
+    with torch.no_grad():
+        q_target, q_online = agent.target(next_obs), agent.online(next_obs)
+    expected = rewards + 0.8 * (1 - terminated) * q_target.max(dim=1).values
+    got = agent.td_targets(rewards, next_obs, terminated)
+    torch.testing.assert_close(got, expected)
+    assert not torch.allclose(got, rewards + 0.8 * (1 - terminated) * q_online.max(dim=1).values)
+
+
+@pytest.mark.parametrize("dueling", [False, True])
+def test_double_and_plain_targets_differ_when_the_argmaxes_disagree(dueling):
+    """Online prefers action 0, the target network values action 1 most: Double DQN bootstraps from
+    ``Q_target(s', 0)``, DQN from ``max Q_target(s', .) = Q_target(s', 1)``."""
+    plain = _agent(seed=5, double=False, dueling=dueling, hidden=(8,), gamma=0.5)
+    double = _agent(seed=5, double=True, dueling=dueling, hidden=(8,), gamma=0.5)
+    for agent in (plain, double):
+        _set_head_bias(agent.online, [1.0, 0.0, 0.0])
+        _set_head_bias(agent.target, [0.0, 5.0, 2.0])
+    rewards, next_obs, terminated = _batch(6)
+    with torch.no_grad():
+        q_target = double.target(next_obs)
+        q_online = double.online(next_obs)
+    assert (q_online.argmax(dim=1) == 0).all()
+    assert (q_target.argmax(dim=1) == 1).all()
+    t_plain = plain.td_targets(rewards, next_obs, terminated)
+    t_double = double.td_targets(rewards, next_obs, terminated)
+    torch.testing.assert_close(t_plain, rewards + 0.5 * (1 - terminated) * q_target[:, 1])
+    torch.testing.assert_close(t_double, rewards + 0.5 * (1 - terminated) * q_target[:, 0])
+    live = terminated == 0
+    assert (t_plain[live] > t_double[live] + 1.0).all()
+    torch.testing.assert_close(t_plain[~live], t_double[~live])  # both just the reward
+    torch.testing.assert_close(t_plain[~live], rewards[~live])
+
+
+@pytest.mark.parametrize("double", [False, True])
+@pytest.mark.parametrize(
+    ("terminated", "truncated", "bootstraps"),
+    [(True, False, False), (False, True, True), (False, False, True), (True, True, False)],
+)
+def test_only_termination_cuts_the_bootstrap(double, terminated, truncated, bootstraps):
+    """One stored transition, a batch of one: the returned loss is ``(Q(s, a) - y)^2`` with ``y`` the
+    reward alone for a terminated transition and the bootstrapped target for a truncated one."""
+    agent = _agent(
+        seed=7, double=double, batch_size=1, buffer_size=4, learning_starts=10**6, gamma=0.7,
+        reward_scale=0.5, max_grad_norm=None,
+    )  # fmt: skip
+    _set_head_bias(agent.target, [2.0, 9.0, 4.0])  # Q_target(s', .) is known whatever s'
+    _set_head_bias(agent.online, [0.5, 0.0, 3.0])  # and Q_online(s', .) too: argmax 2
+    rng = np.random.default_rng(8)
+    t = Transition(_obs(rng), 1, 3.0, _obs(rng), terminated, truncated)
+    agent.observe(t)
+    assert agent.gradient_steps == 0
+    bootstrap = (4.0 if double else 9.0) if bootstraps else 0.0
+    y = 0.5 * 3.0 + 0.7 * bootstrap
+    q = 0.0  # Q_online(s, 1)
+    assert agent.learn() == pytest.approx((q - y) ** 2, rel=1e-6)
+
+
+# -- exploration ----------------------------------------------------------------------------------------
+
+
+def test_linear_schedule():
+    assert linear_schedule(1.0, 0.1, 10, 0) == 1.0
+    assert linear_schedule(1.0, 0.1, 10, 5) == pytest.approx(0.55)
+    assert linear_schedule(1.0, 0.1, 10, 10) == pytest.approx(0.1)
+    assert linear_schedule(1.0, 0.1, 10, 1000) == pytest.approx(0.1)
+    assert linear_schedule(0.4, 1.0, 0, 0) == 1.0
+    assert linear_schedule(0.0, 1.0, 4, 1) == pytest.approx(0.25)
+
+
+def test_epsilon_decays_linearly_per_transition_then_stays():
+    agent = _agent(epsilon_start=0.9, epsilon_end=0.2, exploration_steps=7, learning_starts=10**6,
+                   beta_start=0.3, beta_steps=5)  # fmt: skip
+    rng = np.random.default_rng(0)
+    seen = []
+    for t in range(12):
+        expected = 0.9 + (0.2 - 0.9) * t / 7 if t < 7 else 0.2
+        assert agent.epsilon == pytest.approx(expected)
+        assert agent.stats()["epsilon"] == pytest.approx(expected)
+        assert agent.beta == pytest.approx(min(1.0, 0.3 + 0.7 * t / 5))
+        seen.append(agent.epsilon)
+        agent.act(_obs(rng), explore=True)  # acting does not advance the schedule
+        assert agent.epsilon == pytest.approx(expected)
+        agent.observe(_transition(rng))
+    assert seen[0] > seen[3] > seen[6] > seen[7] == seen[11]
+
+
+def test_explore_false_is_argmax_even_at_epsilon_one():
+    for exploration in ("slot", "episode"):
+        agent = _agent(epsilon_start=1.0, epsilon_end=1.0, exploration=exploration)
+        agent.begin_episode(np.random.default_rng(1))
+        obs = _obs(np.random.default_rng(2), 200)
+        greedy = agent.q_values(obs).argmax(axis=1)
+        assert len(set(greedy.tolist())) > 1  # a network whose argmax depends on the observation
+        assert [agent.act(o, explore=False) for o in obs] == greedy.tolist()
+        np.testing.assert_array_equal(agent.act_batch(obs, explore=False), greedy)
+
+
+def test_epsilon_one_is_uniform():
+    agent = _agent(epsilon_start=1.0, epsilon_end=1.0)
+    agent.begin_episode(np.random.default_rng(3))
+    obs = _obs(np.random.default_rng(4))
+    n = 6000
+    actions = np.array([agent.act(obs, explore=True) for _ in range(n)])
+    counts = np.bincount(actions, minlength=M)
+    assert counts.sum() == n
+    # each station 1/3 of the draws: 4 standard deviations is about 0.024
+    np.testing.assert_allclose(counts / n, 1 / M, atol=0.03)
+    batch = agent.act_batch(np.repeat(obs[None], n, axis=0), explore=True)
+    np.testing.assert_allclose(np.bincount(batch, minlength=M) / n, 1 / M, atol=0.03)
+
+
+def test_intermediate_epsilon_mixes_random_and_greedy():
+    """Epsilon 0.6: a random station (which is the greedy one a third of the time) with probability
+    0.6, so the action differs from the greedy one with probability 0.6 * 2/3 = 0.4."""
+    agent = _agent(epsilon_start=0.6, epsilon_end=0.6)
+    agent.begin_episode(np.random.default_rng(5))
+    obs = _obs(np.random.default_rng(6), 5000)
+    greedy = agent.q_values(obs).argmax(axis=1)
+    actions = np.array([agent.act(o, explore=True) for o in obs])
+    assert np.mean(actions != greedy) == pytest.approx(0.4, abs=0.03)
+
+
+def test_epsilon_zero_is_argmax():
+    for exploration in ("slot", "episode"):
+        agent = _agent(epsilon_start=0.0, epsilon_end=0.0, exploration=exploration)
+        agent.begin_episode(np.random.default_rng(7))
+        obs = _obs(np.random.default_rng(8), 300)
+        greedy = agent.q_values(obs).argmax(axis=1)
+        assert len(set(greedy.tolist())) > 1
+        assert [agent.act(o, explore=True) for o in obs] == greedy.tolist()
+        if exploration == "slot":
+            np.testing.assert_array_equal(agent.act_batch(obs, explore=True), greedy)
+
+
+@pytest.mark.parametrize("exploration", ["slot", "episode"])
+def test_exploration_draws_come_from_the_episode_generator(exploration):
+    """Agents built from different seeds (different networks, different own generators) act alike at
+    epsilon 1 given the same episode generator; another episode generator gives other actions."""
+    obs = _obs(np.random.default_rng(9), 50)
+
+    def episode_actions(agent_seed, episode_seed):
+        agent = _agent(seed=agent_seed, epsilon_start=1.0, epsilon_end=1.0, exploration=exploration)
+        actions = []
+        for e in range(10):  # a generator per episode, as the runner hands them out
+            agent.begin_episode(np.random.default_rng([episode_seed, e]))
+            actions += [agent.act(o, explore=True) for o in obs[:5]]
+        return actions
+
+    assert episode_actions(0, 11) == episode_actions(1, 11)
+    assert episode_actions(0, 11) != episode_actions(0, 12)
+    # the generator handed in is the one consumed
+    agent = _agent(epsilon_start=1.0, epsilon_end=1.0, exploration=exploration)
+    gen = np.random.default_rng(13)
+    before = copy.deepcopy(gen.bit_generator.state)
+    own = copy.deepcopy(agent.learn_rng.bit_generator.state)
+    agent.begin_episode(gen)
+    agent.act(obs[0], explore=True)
+    assert gen.bit_generator.state != before
+    assert agent.learn_rng.bit_generator.state == own
+
+
+def test_episode_exploration_keeps_one_random_station_per_episode():
+    agent = _agent(epsilon_start=1.0, epsilon_end=1.0, exploration="episode")
+    obs = _obs(np.random.default_rng(14), 8)
+    stations = []
+    for e in range(600):
+        agent.begin_episode(np.random.default_rng([15, e]))
+        actions = {agent.act(o, explore=True) for o in obs}
+        assert len(actions) == 1
+        stations.append(actions.pop())
+    np.testing.assert_allclose(np.bincount(stations, minlength=M) / 600, 1 / M, atol=0.07)
+
+
+def test_episode_exploration_follows_the_network_in_a_non_exploring_episode():
+    """Epsilon 0.5: about half the episodes keep one random station; the others are exactly the
+    greedy sequence (which changes station here, so the two kinds cannot be confused)."""
+    agent = _agent(epsilon_start=0.5, epsilon_end=0.5, exploration="episode")
+    obs = _obs(np.random.default_rng(16), 12)
+    greedy = agent.q_values(obs).argmax(axis=1).tolist()
+    assert len(set(greedy)) > 1
+    explored = 0
+    n = 1000
+    for e in range(n):
+        agent.begin_episode(np.random.default_rng([17, e]))
+        actions = [agent.act(o, explore=True) for o in obs]
+        if actions != greedy:
+            assert len(set(actions)) == 1
+            explored += 1
+    assert explored / n == pytest.approx(0.5, abs=0.06)
+    # and act_batch refuses to explore per slot in episode mode
+    with pytest.raises(ValueError, match="episode"):
+        agent.act_batch(obs, explore=True)
+
+
+def test_act_batch_matches_act_when_not_exploring():
+    for dueling in (False, True):
+        agent = _agent(dueling=dueling, seed=18)
+        obs = _obs(np.random.default_rng(19), 64)
+        batch = agent.act_batch(obs, explore=False)
+        assert batch.shape == (64,)
+        assert batch.dtype.kind == "i"
+        assert batch.tolist() == [agent.act(o) for o in obs]
+        assert all(type(agent.act(o)) is int for o in obs[:3])
+
+
+def test_observations_are_scaled_before_the_network():
+    scale = np.array([1e-3] * M + [0.1] * M + [0.5, 1.0, 0.25], dtype=np.float32)
+    agent = _agent(obs_scale=scale)
+    obs = np.random.default_rng(20).uniform(0, 3000, size=(10, OBS_DIM)).astype(np.float32)
+    with torch.no_grad():
+        expected = agent.online(torch.from_numpy(obs * scale)).numpy()
+        unscaled = agent.online(torch.from_numpy(obs)).numpy()
+    np.testing.assert_allclose(agent.q_values(obs), expected, rtol=1e-6)
+    np.testing.assert_allclose(agent.q_values(obs[0]), expected[0], rtol=1e-6)
+    assert not np.allclose(expected, unscaled)
+    assert [agent.act(o) for o in obs] == expected.argmax(axis=1).tolist()
+
+
+def test_observation_scale_of_stations():
+    stations = [SimpleNamespace(points=2), SimpleNamespace(points=1), SimpleNamespace(points=4)]
+    scale = observation_scale(stations, normalized=False)
+    assert scale.dtype == np.float32
+    np.testing.assert_allclose(scale, [1e-3] * 3 + [0.1] * 3 + [0.5, 1.0, 0.25], rtol=1e-7)
+    np.testing.assert_array_equal(observation_scale(stations, normalized=True), np.ones(9, np.float32))
+    # the agent reads it off an environment
+    for normalized in (False, True):
+        env = SimpleNamespace(stations=stations, config=SimpleNamespace(normalize_obs=normalized),
+                              action_space=SimpleNamespace(n=3))  # fmt: skip
+        env.unwrapped = env
+        agent = make_agent_for_env("dqn", env, np.random.default_rng(0), hidden=[4])
+        np.testing.assert_array_equal(agent.obs_scale, observation_scale(stations, normalized))
+
+
+@pytest.mark.parametrize(
+    "obs", [np.zeros(OBS_DIM - 1), np.zeros(OBS_DIM + 1), np.zeros((2, OBS_DIM + 3)), np.zeros(0)]
+)
+def test_wrong_observation_shape_raises(obs):
+    agent = _agent()
+    with pytest.raises(ValueError, match="shape"):
+        agent.act(obs)
+    with pytest.raises(ValueError, match="shape"):
+        agent.q_values(obs)
+    with pytest.raises(ValueError, match="shape"):
+        agent.act_batch(np.atleast_2d(obs))
+    with pytest.raises(ValueError, match="shape"):
+        agent.observe(Transition(obs, 0, 1.0, np.zeros(OBS_DIM), False, False))
+
+
+# -- learning mechanics ---------------------------------------------------------------------------------
+
+
+def test_no_gradient_step_before_learning_starts():
+    agent = _agent(learning_starts=20, batch_size=4)
+    start = _params(agent.online)
+    for i, t in enumerate(_transitions(0, 25), start=1):
+        agent.observe(t)
+        if i < 20:
+            assert agent.gradient_steps == 0
+            assert _equal(_params(agent.online), start)
+        else:
+            assert agent.gradient_steps == i - 19
+    assert not _equal(_params(agent.online), start)
+    assert agent.stats()["transitions"] == 25.0
+    assert agent.stats()["gradient_steps"] == 6.0
+
+
+@pytest.mark.parametrize(("train_freq", "gradient_steps"), [(1, 1), (3, 2), (4, 1), (2, 3)])
+def test_gradient_steps_every_train_freq_transitions(train_freq, gradient_steps):
+    agent = _agent(learning_starts=10, train_freq=train_freq, gradient_steps=gradient_steps, batch_size=4)
+    calls = []
+    learn = agent.learn
+    agent.learn = lambda: calls.append(agent.steps) or learn()
+    for i, t in enumerate(_transitions(1, 40), start=1):
+        agent.observe(t)
+        rounds = sum(1 for s in range(10, i + 1) if s % train_freq == 0)
+        assert agent.gradient_steps == rounds * gradient_steps
+    expected = [s for s in range(10, 41) if s % train_freq == 0 for _ in range(gradient_steps)]
+    assert calls == expected
+
+
+def test_hard_target_update_every_target_update_gradient_steps():
+    agent = _agent(learning_starts=4, batch_size=4, target_update=5, tau=1.0)
+    copied = _params(agent.online)
+    assert _equal(_params(agent.target), copied)
+    checked = 0
+    for t in _transitions(2, 40):
+        before = agent.gradient_steps
+        agent.observe(t)
+        assert agent.gradient_steps == before + (agent.steps >= 4)
+        online, target = _params(agent.online), _params(agent.target)
+        assert agent.target_updates == agent.gradient_steps // 5
+        assert agent.stats()["target_updates"] == agent.gradient_steps // 5
+        if agent.gradient_steps and agent.gradient_steps % 5 == 0:
+            assert _equal(target, online)
+            copied = online
+            checked += 1
+        else:
+            assert _equal(target, copied)  # unchanged since the last copy
+            if agent.gradient_steps:
+                assert not _equal(target, online)
+    assert checked == 7  # 37 gradient steps
+
+
+def test_soft_update_moves_the_target_by_lerp():
+    agent = _agent(tau=0.3)
+    _perturb(agent.target, seed=21)
+    old, online = _params(agent.target), _params(agent.online)
+    agent.update_target()
+    for t, o, n in zip(old, online, _params(agent.target), strict=True):
+        torch.testing.assert_close(n, t + 0.3 * (o - t))
+    assert agent.target_updates == 1
+    # through learning: target_update=1 lerps after every gradient step, towards the updated online
+    agent = _agent(tau=0.25, learning_starts=10**6, target_update=1)
+    _perturb(agent.target, seed=22)
+    for t in _transitions(3, 10):
+        agent.observe(t)
+    old = _params(agent.target)
+    agent.learn()
+    for t, o, n in zip(old, _params(agent.online), _params(agent.target), strict=True):
+        torch.testing.assert_close(n, t + 0.25 * (o - t))
+    assert agent.target_updates == 1
+
+
+def _expected_q_y(agent: DQNAgent, batch) -> tuple[torch.Tensor, torch.Tensor]:
+    """``Q(s, a)`` and the target ``y`` for a replay batch, by hand (before the gradient step)."""
+    c = agent.config
+    rows = torch.arange(len(batch.actions))
+    obs = torch.from_numpy(batch.obs * agent.obs_scale)
+    next_obs = torch.from_numpy(batch.next_obs * agent.obs_scale)
+    with torch.no_grad():
+        q = agent.online(obs)[rows, torch.from_numpy(batch.actions)]
+        q_next = agent.target(next_obs)
+        best = agent.online(next_obs).argmax(dim=1) if c.double else q_next.argmax(dim=1)
+        boot = q_next[rows, best]
+    live = 1 - torch.from_numpy(batch.terminated).float()
+    return q, torch.from_numpy(batch.rewards) + c.gamma * live * boot
+
+
+def _expected_td(agent: DQNAgent, batch) -> torch.Tensor:
+    q, y = _expected_q_y(agent, batch)
+    return q - y
+
+
+@pytest.mark.parametrize("double", [False, True])
+def test_priorities_follow_the_td_errors(double):
+    """Eight transitions at equal priority and a batch of eight: the stratified draw takes each slot
+    once, so every priority becomes ``(|td| + eps) ** alpha`` of its TD error."""
+    agent = _agent(double=double, batch_size=8, learning_starts=10**6, alpha=0.6, priority_eps=1e-3)
+    _perturb(agent.target, seed=23)
+    for t in _transitions(4, 8):
+        agent.observe(t)
+    slots = np.arange(8)
+    np.testing.assert_array_equal(agent.replay.priorities(slots), np.ones(8))
+    batch = agent.replay.sample(8, copy.deepcopy(agent.learn_rng), agent.beta)
+    np.testing.assert_array_equal(np.sort(batch.indices), slots)
+    td = _expected_td(agent, batch).numpy().astype(np.float64)
+    agent.learn()
+    expected = np.zeros(8)
+    expected[batch.indices] = (np.abs(td) + 1e-3) ** 0.6
+    np.testing.assert_allclose(agent.replay.priorities(slots), expected, rtol=1e-5)
+    assert not np.allclose(agent.replay.priorities(slots), 1.0)
+    assert agent.replay.max_priority == pytest.approx(max(1.0, expected.max()))
+
+
+def test_alpha_zero_is_uniform_replay():
+    agent = _agent(batch_size=8, learning_starts=10**6, alpha=0.0)
+    for t in _transitions(5, 20):
+        agent.observe(t)
+    for _ in range(5):
+        agent.learn()
+    np.testing.assert_array_equal(agent.replay.priorities(np.arange(20)), np.ones(20))
+    batch = agent.replay.sample(8, copy.deepcopy(agent.learn_rng), agent.beta)
+    np.testing.assert_array_equal(batch.weights, np.ones(8, np.float32))
+
+
+@pytest.mark.parametrize("loss", ["mse", "huber"])
+@pytest.mark.parametrize("double", [False, True])
+def test_loss_is_the_importance_weighted_mean_by_hand(loss, double):
+    """On a replay with unequal priorities, ``learn()`` returns ``mean(w_i * l(td_i))`` with the batch
+    it draws; ``l`` is the square (MSE) or Huber (quadratic below 1, linear above)."""
+    scale = np.array([0.5] * M + [1.0] * M + [2.0] * M, dtype=np.float32)
+    agent = _agent(double=double, loss=loss, batch_size=16, learning_starts=10**6, alpha=0.7,
+                   beta_start=0.3, beta_steps=100, obs_scale=scale)  # fmt: skip
+    _perturb(agent.target, seed=24, scale=0.05)
+    for t in _transitions(6, 40):
+        agent.observe(t)
+    rng = np.random.default_rng(25)
+    agent.replay.update_priorities(np.arange(40), rng.uniform(0.05, 4.0, 40))
+    batch = agent.replay.sample(16, copy.deepcopy(agent.learn_rng), agent.beta)
+    assert batch.weights.min() < 0.9  # the weights matter on this batch
+    td = _expected_td(agent, batch)
+    assert (td.abs() > 1).any()
+    assert (td.abs() < 1).any()
+    huber = torch.where(td.abs() < 1, 0.5 * td**2, td.abs() - 0.5)
+    per_sample = td**2 if loss == "mse" else huber
+    weights = torch.from_numpy(batch.weights)
+    expected = float((weights * per_sample).mean())
+    got = agent.learn()
+    assert got == pytest.approx(expected, rel=1e-5)
+    assert got != pytest.approx(float(per_sample.mean()), rel=1e-3)  # unweighted would differ
+    other = td**2 if loss == "huber" else huber
+    assert got != pytest.approx(float((weights * other).mean()), rel=1e-3)
+    assert agent.stats()["loss_total"] == pytest.approx(got)
+
+
+def test_importance_weights_scale_the_gradient():
+    """The gradient of ``learn()``'s loss equals the gradient of the hand-weighted loss (recorded just
+    before the optimizer step, without clipping)."""
+    agent = _agent(batch_size=16, learning_starts=10**6, alpha=1.0, beta_start=1.0, max_grad_norm=None)
+    for t in _transitions(7, 30):
+        agent.observe(t)
+    agent.replay.update_priorities(np.arange(30), np.random.default_rng(26).uniform(0.01, 5.0, 30))
+    batch = agent.replay.sample(16, copy.deepcopy(agent.learn_rng), agent.beta)
+    _, y = _expected_q_y(agent, batch)
+    shadow = copy.deepcopy(agent.online)
+    obs = torch.from_numpy(batch.obs * agent.obs_scale)
+    q = shadow(obs)[torch.arange(16), torch.from_numpy(batch.actions)]
+    w = torch.from_numpy(batch.weights)
+    assert w.min() < 0.5
+    (w * (q - y) ** 2).mean().backward()
+    unweighted = copy.deepcopy(agent.online)
+    q2 = unweighted(obs)[torch.arange(16), torch.from_numpy(batch.actions)]
+    ((q2 - y) ** 2).mean().backward()
+    grads = []
+    agent.optimizer.register_step_pre_hook(
+        lambda *_: grads.append([p.grad.clone() for p in agent.online.parameters()])
+    )
+    agent.learn()
+    assert len(grads) == 1
+    for g, want in zip(grads[0], shadow.parameters(), strict=True):
+        torch.testing.assert_close(g, want.grad, rtol=1e-4, atol=1e-6)
+    pairs = zip(grads[0], unweighted.parameters(), strict=True)
+    assert not all(torch.allclose(g, p.grad, rtol=1e-2) for g, p in pairs)
+
+
+def _grad_norm(params) -> float:
+    return float(torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(p.grad) for p in params])))
+
+
+def test_gradient_clipping_bounds_the_norm():
+    """Same agent and batch with and without clipping: the clipped gradient is the unclipped one
+    scaled down to norm ``max_grad_norm``."""
+    recorded = {}
+    for clip in (None, 0.05):
+        agent = _agent(seed=27, batch_size=16, learning_starts=10**6, max_grad_norm=clip)
+        for t in _transitions(8, 30):
+            agent.observe(t._replace(reward=t.reward * 100))  # big TD errors, big gradients
+        grads = []
+        agent.optimizer.register_step_pre_hook(
+            lambda *_, a=agent, g=grads: g.append([p.grad.clone() for p in a.online.parameters()])
+        )
+        agent.learn()
+        recorded[clip] = grads[0]
+    raw = math.sqrt(sum(float((g**2).sum()) for g in recorded[None]))
+    clipped = math.sqrt(sum(float((g**2).sum()) for g in recorded[0.05]))
+    assert raw > 1.0
+    assert clipped == pytest.approx(0.05, rel=1e-3)
+    for g_raw, g_clip in zip(recorded[None], recorded[0.05], strict=True):
+        torch.testing.assert_close(g_clip, g_raw * (0.05 / raw), rtol=1e-3, atol=1e-8)
+
+
+def test_reward_scale_multiplies_stored_rewards():
+    agent = _agent(reward_scale=0.01, learning_starts=10**6)
+    rng = np.random.default_rng(28)
+    rewards = [250.0, -40.0, 7.0]
+    for r in rewards:
+        agent.observe(_transition(rng, reward=r))
+    stored = agent.replay.state_dict()["rewards"][:3]
+    np.testing.assert_allclose(stored, np.array(rewards) * 0.01, rtol=1e-6)
+
+
+def test_learning_changes_only_the_online_network_between_target_updates():
+    agent = _agent(learning_starts=10**6, target_update=1000)
+    for t in _transitions(9, 20):
+        agent.observe(t)
+    online, target = _params(agent.online), _params(agent.target)
+    losses = [agent.learn() for _ in range(5)]
+    assert all(np.isfinite(losses))
+    assert not _equal(_params(agent.online), online)
+    assert _equal(_params(agent.target), target)
+    stats = agent.stats()
+    assert stats["gradient_steps"] == 5.0
+    assert stats["loss_total"] == pytest.approx(sum(losses))
+    assert set(stats) == {"transitions", "gradient_steps", "target_updates", "loss_total", "q_total",
+                          "epsilon", "beta"}  # fmt: skip
+
+
+# -- validation -----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "named"),
+    [
+        ({"lr": 0.0}, "lr=0.0"),
+        ({"lr": -1e-3}, "lr=-0.001"),
+        ({"lr": float("nan")}, "lr=nan"),
+        ({"batch_size": 0}, "batch_size=0"),
+        ({"batch_size": 32, "buffer_size": 16}, "buffer_size=16"),
+        ({"hidden": []}, "hidden=[]"),
+        ({"hidden": [8, 0]}, "hidden=[8, 0]"),
+        ({"epsilon_start": 1.5}, "epsilon_start=1.5"),
+        ({"epsilon_end": -0.1}, "epsilon_end=-0.1"),
+        ({"gamma": 1.2}, "gamma=1.2"),
+        ({"alpha": -1}, "alpha=-1"),
+        ({"beta_start": 2.0}, "beta_start=2.0"),
+        ({"tau": 0}, "tau=0"),
+        ({"tau": 1.5}, "tau=1.5"),
+        ({"loss": "l1"}, "loss='l1'"),
+        ({"exploration": "bogus"}, "exploration='bogus'"),
+        ({"target_update": 0}, "target_update=0"),
+        ({"train_freq": 0}, "train_freq=0"),
+        ({"gradient_steps": -1}, "gradient_steps=-1"),
+        ({"learning_starts": -1}, "learning_starts=-1"),
+        ({"exploration_steps": 2.5}, "exploration_steps=2.5"),
+        ({"max_grad_norm": 0.0}, "max_grad_norm=0.0"),
+        ({"reward_scale": 0}, "reward_scale=0"),
+        ({"priority_eps": 0}, "priority_eps=0"),
+        ({"double": "yes"}, "double='yes'"),
+        ({"obs_scale": [1.0] * (OBS_DIM - 1)}, "obs_scale"),
+        ({"obs_scale": [1.0] * (OBS_DIM + 3)}, "obs_scale"),
+        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [0.0]}, "obs_scale"),
+        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [-2.0]}, "obs_scale"),
+        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [float("nan")]}, "obs_scale"),
+        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [float("inf")]}, "obs_scale"),
+    ],
+)
+def test_bad_settings_raise_naming_the_value(kwargs, named):
+    with pytest.raises(ValueError) as info:
+        _agent(**kwargs)
+    assert named in str(info.value)
+    if "obs_scale" not in kwargs:
+        with pytest.raises(ValueError) as info:
+            DQNConfig(**{**SMALL, **kwargs})
+        assert named in str(info.value)
+        with pytest.raises(ValueError) as info:
+            make_agent("dueling_ddqn", M, np.random.default_rng(0), **{**SMALL, **kwargs})
+        assert named in str(info.value)
+
+
+def test_bad_constructor_arguments():
+    with pytest.raises(ValueError, match="n_stations=0"):
+        DQNAgent(0, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="rng"):
+        DQNAgent(M, 0)  # type: ignore[arg-type]
+
+
+def test_default_settings_are_valid():
+    agent = DQNAgent(M, np.random.default_rng(0))
+    assert agent.config == DQNConfig()
+    np.testing.assert_array_equal(agent.obs_scale, np.ones(OBS_DIM, np.float32))
+    assert "dqn" in repr(agent)
+
+
+# -- state ----------------------------------------------------------------------------------------------
+
+RESUME = {"hidden": (16, 16), "batch_size": 8, "buffer_size": 200, "learning_starts": 20,
+          "target_update": 7, "exploration_steps": 300, "lr": 3e-3}  # fmt: skip
+
+
+def _mid_training(name: str, exploration: str = "slot") -> DQNAgent:
+    agent = make_agent(name, M, np.random.default_rng(30), exploration=exploration, **RESUME)
+    _train(agent, seed=31, episodes=range(25))
+    assert agent.gradient_steps > 20
+    assert agent.target_updates > 2
+    return agent
+
+
+def _continue(agent: DQNAgent) -> tuple[list, list]:
+    """More training (episodes with exploration and learning), direct learn() calls, more observes."""
+    rows = _train(agent, seed=31, episodes=range(25, 45))
+    losses = [agent.learn() for _ in range(5)]
+    for t in _transitions(32, 30):
+        agent.observe(t)
+    return [r.choices for r in rows], losses
+
+
+@pytest.mark.parametrize("via", ["memory", "checkpoint"])
+@pytest.mark.parametrize(("name", "exploration"), [("dqn", "slot"), ("dueling_ddqn", "episode")])
+def test_restored_agent_continues_exactly(tmp_path, via, name, exploration):
+    original = _mid_training(name, exploration)
+    state = original.state_dict()
+    if via == "checkpoint":
+        save_checkpoint(tmp_path, {"format": "evcd.train/1", "agent": state, "episode": 25}, "ckpt_25")
+        state = load_checkpoint(tmp_path)["agent"]
+    restored = make_agent(name, M, np.random.default_rng(999), exploration=exploration, **RESUME)
+    assert not _equal(_params(restored.online), _params(original.online))
+    restored.load_state_dict(state)
+    assert restored.stats() == original.stats()
+    # the current generator too: an episode begun without a new generator explores alike
+    obs = _obs(np.random.default_rng(33), 40)
+    original.begin_episode()
+    restored.begin_episode()
+    assert [original.act(o, explore=True) for o in obs] == [restored.act(o, explore=True) for o in obs]
+
+    choices_a, losses_a = _continue(original)
+    choices_b, losses_b = _continue(restored)
+    assert choices_a == choices_b
+    assert losses_a == losses_b
+    assert original.stats() == restored.stats()
+    assert original.gradient_steps > 100
+    assert _equal(_params(original.online), _params(restored.online))
+    assert _equal(_params(original.target), _params(restored.target))
+    assert _state_equal(original.optimizer.state_dict(), restored.optimizer.state_dict())
+    assert _state_equal(original.replay.state_dict(), restored.replay.state_dict())
+    assert original.learn_rng.bit_generator.state == restored.learn_rng.bit_generator.state
+
+
+def test_state_dict_is_a_snapshot():
+    """A state taken mid-training and loaded only after the original went on (into two agents at
+    once) still replays the original's continuation: neither the state nor the agents share tensors."""
+    original = _mid_training("dueling_ddqn")
+    state = original.state_dict()
+    choices, losses = _continue(original)
+    first = make_agent("dueling_ddqn", M, np.random.default_rng(7), **RESUME)
+    second = make_agent("dueling_ddqn", M, np.random.default_rng(8), **RESUME)
+    first.load_state_dict(state)
+    second.load_state_dict(state)
+    assert _continue(first) == (choices, losses)
+    assert _continue(second) == (choices, losses)
+    assert _equal(_params(first.online), _params(original.online))
+    assert _equal(_params(second.online), _params(original.online))
+
+
+def test_a_fresh_agent_does_not_continue_like_the_trained_one():
+    """The counter-test of the resume test: without the state, the same continuation differs."""
+    original = _mid_training("dqn")
+    other = make_agent("dqn", M, np.random.default_rng(999), **RESUME)
+    _, losses_a = _continue(original)
+    _, losses_b = _continue(other)
+    assert losses_a != losses_b
+    assert not _equal(_params(original.online), _params(other.online))
+
+
+def test_state_dict_is_what_torch_loads_with_weights_only(tmp_path):
+    agent = _mid_training("dueling_ddqn")
+    path = save_checkpoint(tmp_path, agent.state_dict(), "agent")
+    loaded = load_checkpoint(path)
+    assert loaded["format"] == STATE_FORMAT
+    assert loaded["n_stations"] == M
+    assert loaded["config"]["hidden"] == [16, 16]
+    assert loaded["rng"] == agent.rng.bit_generator.state
+    assert torch.equal(loaded["torch_rng"], agent.state_dict()["torch_rng"])
+
+
+def test_load_state_dict_restores_the_saved_torch_generator():
+    agent = _mid_training("dqn")
+    state = agent.state_dict()
+    saved = state["torch_rng"].clone()
+    torch.rand(100)  # move the global generator on
+    assert not torch.equal(torch.random.get_rng_state(), saved)
+    _agent(seed=1, **RESUME).load_state_dict(state)
+    assert torch.equal(torch.random.get_rng_state(), saved)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "named"),
+    [
+        ({"n_stations": 4}, "size 9"),
+        ({"n_stations": 2}, "size 9"),
+        ({"hidden": (16, 8)}, "hidden"),
+        ({"hidden": (16,)}, "hidden"),
+        ({"dueling": True}, "dueling"),
+        ({"double": True}, "double"),
+    ],
+)
+@pytest.mark.parametrize("policy_only", [False, True])
+def test_load_into_a_mismatched_agent_raises(kwargs, named, policy_only):
+    state = _agent(**RESUME).state_dict()
+    other = _agent(seed=2, **{**RESUME, **kwargs})
+    before = _params(other.online)
+    with pytest.raises(CheckpointError, match=named):
+        other.load_state_dict(state, policy_only=policy_only)
+    assert _equal(_params(other.online), before)
+
+
+def test_load_rejects_a_state_that_is_not_a_dqn_agent():
+    agent = _agent()
+    with pytest.raises(CheckpointError, match="not a DQN agent"):
+        agent.load_state_dict({"format": "evcd.train/1"})
+    with pytest.raises(CheckpointError, match="not a DQN agent"):
+        agent.load_state_dict([1, 2])  # type: ignore[arg-type]
+
+
+def test_policy_only_loads_just_the_networks():
+    trained = _mid_training("dueling_ddqn")
+    fresh = make_agent("dueling_ddqn", M, np.random.default_rng(5), **RESUME)
+    optimizer = copy.deepcopy(fresh.optimizer.state_dict())
+    fresh.load_state_dict(trained.state_dict(), policy_only=True)
+    assert _equal(_params(fresh.online), _params(trained.online))
+    assert _equal(_params(fresh.target), _params(trained.target))
+    assert fresh.steps == 0
+    assert fresh.gradient_steps == 0
+    assert len(fresh.replay) == 0
+    assert _state_equal(fresh.optimizer.state_dict(), optimizer)
+    assert fresh.epsilon == fresh.config.epsilon_start
+    # and it acts like the trained one
+    obs = _obs(np.random.default_rng(6), 50)
+    np.testing.assert_array_equal(fresh.act_batch(obs), trained.act_batch(obs))
+
+
+def test_a_different_observation_scale_is_taken_from_the_checkpoint():
+    trained = _agent(obs_scale=np.full(OBS_DIM, 0.5, np.float32))
+    other = _agent(seed=3, obs_scale=np.full(OBS_DIM, 2.0, np.float32))
+    other.load_state_dict(trained.state_dict(), policy_only=True)
+    np.testing.assert_array_equal(other.obs_scale, trained.obs_scale)
+    obs = _obs(np.random.default_rng(7), 20)
+    np.testing.assert_array_equal(other.q_values(obs), trained.q_values(obs))
+
+
+@pytest.mark.parametrize("name", ["dqn", "dueling_ddqn"])
+def test_load_a_trainer_checkpoint(tmp_path, name):
+    trained = _mid_training(name)
+    run_dir = tmp_path / "run"
+    payload = {"format": "evcd.train/1", "agent": trained.state_dict(), "episodes_done": 25}
+    save_checkpoint(run_dir / "checkpoints", payload, "ckpt_0000025")
+    obs = _obs(np.random.default_rng(8), 40)
+    for where in (run_dir, run_dir / "checkpoints", run_dir / "checkpoints" / "latest.json"):
+        policy = make_agent(name, M, np.random.default_rng(1), **RESUME)
+        policy.load(where)
+        assert _equal(_params(policy.online), _params(trained.online))
+        assert policy.steps == 0  # the policy only
+        np.testing.assert_array_equal(policy.act_batch(obs), trained.act_batch(obs))
+    built = make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **RESUME)
+    assert _equal(_params(built.online), _params(trained.online))
+    config = checkpoint_agent_config(run_dir)
+    assert config == {"hidden": (16, 16), "double": name == "dueling_ddqn", "dueling": name == "dueling_ddqn"}
+    # a bare agent state (not wrapped by the trainer) works too
+    save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")
+    assert checkpoint_agent_config(tmp_path / "bare") == config
+    with pytest.raises(CheckpointError, match="hidden"):
+        make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **{**RESUME, "hidden": (8,)})
+
+
+def test_a_non_dqn_checkpoint_is_refused(tmp_path):
+    save_checkpoint(tmp_path, {"format": "evcd.train/1", "agent": {"format": "greedy"}}, "ckpt_1")
+    with pytest.raises(CheckpointError, match="DQN"):
+        checkpoint_agent_config(tmp_path)
+    with pytest.raises(CheckpointError, match="DQN"):
+        _agent().load(tmp_path)
+    save_checkpoint(tmp_path / "other", {"weights": torch.ones(3)}, "x")
+    with pytest.raises(CheckpointError, match="DQN"):
+        checkpoint_agent_config(tmp_path / "other")
+    with pytest.raises(CheckpointError):
+        checkpoint_agent_config(tmp_path / "missing")
+
+
+# -- determinism and random state -----------------------------------------------------------------------
+
+
+def test_same_seed_same_weights_other_seed_differs():
+    def trained(seed):
+        agent = make_agent("dueling_ddqn", M, np.random.default_rng(seed), **RESUME)
+        rows = _train(agent, seed=33, episodes=range(20))
+        return agent, [r.choices for r in rows]
+
+    a, rows_a = trained(40)
+    b, rows_b = trained(40)
+    c, _ = trained(41)
+    assert a.gradient_steps > 0
+    assert rows_a == rows_b
+    assert _equal(_params(a.online), _params(b.online))
+    assert _equal(_params(a.target), _params(b.target))
+    assert not _equal(_params(a.online), _params(c.online))
+
+
+def test_no_global_random_state_is_used():
+    torch.manual_seed(1234)
+    np.random.seed(1234)
+    torch_before = torch.random.get_rng_state()
+    np_before = np.random.get_state()
+
+    for name, exploration in (("dqn", "slot"), ("dueling_ddqn", "episode")):
+        agent = make_agent(name, M, np.random.default_rng(0), exploration=exploration, **RESUME)
+        agent.begin_episode(np.random.default_rng(1))
+        rng = np.random.default_rng(2)
+        for t in _transitions(3, 60):
+            agent.act(t.obs, explore=True)
+            agent.act(t.obs, explore=False)
+            agent.observe(t)
+        if exploration == "slot":
+            agent.act_batch(_obs(rng, 5), explore=True)
+        agent.learn()
+        agent.update_target()
+        agent.state_dict()
+        agent.stats()
+        assert agent.gradient_steps > 0
+
+    assert torch.equal(torch.random.get_rng_state(), torch_before)
+    assert _np_state_equal(np.random.get_state(), np_before)
