@@ -1,0 +1,149 @@
+"""Train an agent and evaluate it beside greedy on held-out episodes.
+
+    python scripts/train.py agent=dueling_ddqn evs=400
+    python scripts/train.py -m agent=dqn,dueling_ddqn evs=200,300,400          # one run directory per job
+    python scripts/train.py agent=dqn experiment=paper                          # the paper's protocol
+    python scripts/train.py agent=greedy                                        # rules: evaluation only
+    python scripts/train.py resume=true hydra.run.dir=outputs/train/<run>       # continue a run
+    tensorboard --logdir outputs/
+
+Everything is in ``conf/train.yaml`` (and ``conf/experiment/``); see :mod:`evcd.train` for what a
+run does and writes. Bad settings stop the run with exit code 2 and a message naming the value,
+before SUMO starts.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+import torch
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig, OmegaConf
+
+from evcd.agents import agent_class, make_agent_for_env
+from evcd.checkpoint import CheckpointError
+from evcd.config_utils import agent_params, check_integer, env_kwargs
+from evcd.env import ChargingNavEnv
+from evcd.env.runner import SingleEnvRunner
+from evcd.evaluate import AGENT_STREAM, agent_rng
+from evcd.train import TrainSettings, train_and_evaluate
+
+log = logging.getLogger("train")
+
+
+def _days(cfg: DictConfig, key: str) -> tuple[int, ...]:
+    days = OmegaConf.to_container(OmegaConf.select(cfg, key), resolve=True)
+    if not isinstance(days, list) or not days:
+        raise ValueError(f"{key}={days!r}: must be a non-empty list of demand seeds, e.g. [0]")
+    return tuple(days)
+
+
+def build(cfg: DictConfig) -> dict[str, Any]:
+    """Everything the run needs, checked before any simulation starts."""
+    settings = TrainSettings(
+        episodes=check_integer(cfg.train.episodes, "train.episodes", 0),
+        eval_episodes=check_integer(cfg.eval.episodes, "eval.episodes", 1),
+        seed=check_integer(cfg.seed, "seed", 0),
+        checkpoint_every=check_integer(cfg.train.checkpoint_every, "train.checkpoint_every", 0),
+        progress=bool(cfg.progress),
+        log_window=check_integer(cfg.train.log_window, "train.log_window", 1),
+        resamples=check_integer(cfg.eval.bootstrap_resamples, "eval.bootstrap_resamples", 1),
+    )
+    check_integer(cfg.torch_threads, "torch_threads", 1)
+    name, params = agent_params(cfg)
+    if agent_class(name).learns and settings.episodes < 1:
+        raise ValueError(f"train.episodes={settings.episodes}: agent {name!r} learns, so it needs >= 1")
+    if params.get("checkpoint") is not None:
+        raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
+                         "resume=true with its hydra.run.dir")  # fmt: skip
+    params.pop("checkpoint", None)
+    train_days, eval_days = _days(cfg, "train.days"), _days(cfg, "eval.days")
+    if tuple(cfg.env.demand_seeds) != train_days:
+        raise ValueError(f"env.demand_seeds={list(cfg.env.demand_seeds)}: train.py sets it from "
+                         f"train.days (and eval.days); set those instead")  # fmt: skip
+    envs = {
+        "train": ChargingNavEnv(**{**env_kwargs(cfg), "demand_seeds": train_days}),
+        "eval": ChargingNavEnv(**{**env_kwargs(cfg), "demand_seeds": eval_days}),
+    }  # validates every environment value; loads the scenario; no SUMO yet
+    if set(train_days) & set(eval_days):
+        log.warning("train.days and eval.days share %s: the evaluation is not on unseen traffic",
+                    sorted(set(train_days) & set(eval_days)))  # fmt: skip
+    agent = make_agent_for_env(name, envs["train"], agent_rng(settings.seed), **params)
+    baseline = None
+    if cfg.eval.baseline is not None:
+        base_rng = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(AGENT_STREAM, 1)))
+        baseline = make_agent_for_env(str(cfg.eval.baseline), envs["eval"], base_rng)
+        if baseline.learns:
+            raise ValueError(f"eval.baseline={cfg.eval.baseline!r}: must be a rule (random, greedy, "
+                             "queue_aware)")  # fmt: skip
+    return {"settings": settings, "agent": agent, "baseline": baseline, "envs": envs}
+
+
+def train(cfg: DictConfig) -> float:
+    """Run the training described by ``cfg`` in Hydra's run directory; return the evaluation mean
+    travel time (what a sweeper minimises)."""
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    parts = build(cfg)
+    torch.set_num_threads(int(cfg.torch_threads))
+    envs = parts["envs"]
+    agent, settings = parts["agent"], parts["settings"]
+    log.info("%r on %s, evs=%s, train days %s, eval days %s, seed %d -> %s", agent,
+             envs["train"].scenario.root, cfg.evs, list(cfg.train.days), list(cfg.eval.days),
+             settings.seed, out_dir)  # fmt: skip
+    result = train_and_evaluate(
+        agent,
+        lambda phase: SingleEnvRunner(envs[phase]),
+        settings,
+        out_dir,
+        baseline=parts["baseline"],
+        resume=bool(cfg.resume),
+        config=OmegaConf.to_container(cfg, resolve=True),
+    )
+    for line in report_lines(result, cfg.evs):
+        log.info("%s", line)
+    return float(result.evaluation.summary.mean_travel_time)
+
+
+def report_lines(result: Any, evs: int) -> list[str]:
+    """The run's outcome in a few sentences: training, evaluation, the paired comparison."""
+    s, t = result.evaluation.summary, result.training
+    lines = []
+    if t["episodes"]:
+        lines.append(
+            f"trained {t['episodes']} episodes, {t['transitions']} transitions, {t['gradient_steps']} "
+            f"gradient steps, {t['target_updates']} target updates in {t['wall_s']:.0f} s "
+            f"({t['transitions_per_second']:.1f} transitions/s; day builds {t['day_build_s']:.0f} s)"
+        )
+    lines.append(
+        f"{result.evaluation.agent}, evs={evs}, seed={result.evaluation.seed}: mean travel time "
+        f"{s.mean_travel_time:.1f} s (95% CI {s.ci_low:.1f}-{s.ci_high:.1f}) over {s.completed} of "
+        f"{s.episodes} evaluation episodes ({s.truncated} truncated)"
+    )
+    p = result.paired
+    if p is not None and result.baseline is not None:
+        lines.append(
+            f"vs {result.baseline.agent} on the same {p['pairs']} episodes: {p['agent_mean']:.1f} s vs "
+            f"{p['baseline_mean']:.1f} s, difference {p['mean_difference']:+.1f} s (95% CI "
+            f"{p['ci_low']:+.1f} to {p['ci_high']:+.1f}); faster in {p['agent_faster']}, equal in "
+            f"{p['equal']}, slower in {p['agent_slower']}"
+        )
+    return lines
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="train")
+def main(cfg: DictConfig) -> float:
+    """Hydra entry point; exits with code 2 on a bad setting."""
+    try:
+        return train(cfg)
+    except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
+        log.error("%s", exc)
+        sys.exit(2)
+
+
+if __name__ == "__main__":
+    main()
