@@ -1,10 +1,12 @@
 """Overlay the learning curves of training runs: travel time per training episode, and switches.
 
     python scripts/plot_curves.py outputs/train/<dqn run> outputs/train/<dueling run> --out curves.png
-    python scripts/plot_curves.py RUN... --reference "greedy, same episodes=231.4" --window 100
+    python scripts/plot_curves.py RUN... greedy_on_train_episodes.csv --reference "queue_aware=250"
 
 Each run directory's ``train_episodes.csv`` is one curve, labelled with its agent (from
-``results.json``) or ``--label``. ``--reference "LABEL=SECONDS"`` draws a horizontal line.
+``results.json``) or ``--label``; an episodes CSV given directly (e.g. a rule run on the same
+episodes) is one curve too, labelled with its file name. ``--reference "LABEL=SECONDS"`` draws a
+horizontal line.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ log = logging.getLogger("plot_curves")
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit code."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("runs", nargs="+", type=Path, help="training run directories")
+    p.add_argument("runs", nargs="+", type=Path, help="training run directories or episodes CSV files")
     p.add_argument("--out", type=Path, default=Path("learning_curves.png"), help="PNG to write")
     p.add_argument("--label", action="append", default=[], help="a label per run (default: its agent)")
     p.add_argument("--reference", action="append", default=[], metavar="LABEL=SECONDS",
@@ -50,12 +52,13 @@ def main(argv: list[str] | None = None) -> int:
             references[label] = float(value)
         curves = {}
         for i, run in enumerate(args.runs):
-            if not (run / TRAIN_CSV).is_file():
+            csv_file = run if run.is_file() else run / TRAIN_CSV
+            if not csv_file.is_file():
                 raise ValueError(f"{run}: no {TRAIN_CSV} (not a finished training run of a learning agent)")
-            label = args.label[i] if args.label else _agent(run)
+            label = args.label[i] if args.label else (run.stem if run.is_file() else _agent(run))
             if label in curves:
                 label = f"{label} ({run.name})"
-            curves[label] = read_episodes_csv(run / TRAIN_CSV)
+            curves[label] = read_episodes_csv(csv_file)
     except (ValueError, OSError) as exc:
         log.error("%s", exc)
         return 2

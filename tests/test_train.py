@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import csv
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -297,3 +299,33 @@ def test_the_bootstrap_of_the_comparison_is_seeded(trained):
     rows_b = result.baseline.rows
     again = paired_difference(rows_a, rows_b, bootstrap_rng(3), 500)
     assert again == result.paired
+
+
+# ---------------------------------------------------------------------------------------- curves figure
+PLOT_CURVES = Path(__file__).resolve().parents[1] / "scripts" / "plot_curves.py"
+
+
+def plot_curves(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(PLOT_CURVES), *args], capture_output=True, text=True, timeout=120
+    )
+
+
+def test_plot_curves_overlays_runs_and_csv_files(trained, tmp_path):
+    run_dir, _, _ = trained
+    out = tmp_path / "curves.png"
+    proc = plot_curves(
+        str(run_dir), str(run_dir / "baseline_episodes.csv"), "--out", str(out), "--reference", "x=1"
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    again = plot_curves(str(run_dir), "--out", str(out))
+    assert again.returncode == 2 and "exists" in again.stderr
+    bad_calls = [
+        ([str(tmp_path)], "no train_episodes.csv"),
+        ([str(run_dir), "--label", "a", "--label", "b"], "2 --label for 1 runs"),
+        ([str(run_dir), "--reference", "150"], "LABEL=SECONDS"),
+    ]
+    for bad, needle in bad_calls:
+        proc = plot_curves(*bad, "--out", str(tmp_path / "other.png"))
+        assert proc.returncode == 2 and needle in proc.stderr, proc.stderr
