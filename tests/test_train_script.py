@@ -137,6 +137,7 @@ def test_experiments_exist_and_the_default_is_the_peak():
     assert cfg.agent.name == "dueling_ddqn" and cfg.evs == 400
     assert list(cfg.env.departure_window) == [25200.0, 36000.0]
     assert list(cfg.eval.days) != list(cfg.train.days) and cfg.eval.baseline == "greedy"
+    assert cfg.env.reward == "time" and cfg.learner.exploration == "episode"
 
 
 def test_the_paper_experiment_has_the_papers_settings():
@@ -145,7 +146,7 @@ def test_the_paper_experiment_has_the_papers_settings():
     assert list(learner.hidden) == [512, 256] and learner.lr == 0.01 and learner.batch_size == 32
     assert learner.target_update == 8000 and learner.buffer_size == 10000
     assert (learner.epsilon_start, learner.epsilon_end) == (1.0, 0.1)
-    assert cfg.train.episodes == 50 and cfg.env.protocol == "paper"
+    assert cfg.train.episodes == 50 and cfg.env.reward == "paper" and learner.loss == "mse"
     assert list(cfg.env.departure_window) == [0.0, 86400.0]
 
 
@@ -165,6 +166,10 @@ def test_the_learner_block_covers_the_agents_hyperparameters():
     _name, built = agent_params(compose_train("learner.lr=0.005"))
     assert built["lr"] == 0.005 and built["double"] is True and set(built) >= set(cfg.learner)
     assert set(defaults) >= set(cfg.learner)
+    # conf/train.yaml's block holds the agent's own defaults; the experiments set their values
+    base = OmegaConf.to_container(compose_train("~experiment").learner)
+    base = {k: tuple(v) if isinstance(v, list) else v for k, v in base.items()}
+    assert base == {k: defaults[k] for k in base}
 
 
 # ---------------------------------------------------------------------------------------- runs
@@ -200,7 +205,7 @@ def test_a_tiny_training_run_end_to_end(small, tmp_path):
     proc = subprocess.run(
         [sys.executable, str(ROOT / "scripts" / "evaluate.py"), *[o for o in small if not o.startswith(
             ("learner.", "eval."))], "agent=dqn", f"agent.checkpoint={out}", "episodes=2",
-         "env.demand_seeds=[1]", f"hydra.run.dir={ev}"],
+         "env.demand_seeds=[1]", "env.reward=time", f"hydra.run.dir={ev}"],  # peak's reward
         cwd=ROOT, capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-3000:]

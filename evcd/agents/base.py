@@ -15,6 +15,7 @@ replaced per episode), never the global one, so a run is reproducible from its s
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -94,6 +95,33 @@ class Agent(ABC):
         that co-simulates episodes may call it); agents with a network override it with one
         forward pass. This default calls :meth:`act` row by row."""
         return np.array([self.act(o, explore) for o in np.asarray(obs)], dtype=np.int64)
+
+    # ------------------------------------------------------------------ many episodes at once
+    def episode_state(self) -> Any:
+        """What the agent keeps about the current episode (by default its generator), so that a
+        runner with several episodes in flight (the batched engine) can switch between them:
+        ``state = agent.episode_state()`` after ``begin_episode``, later
+        ``agent.set_episode_state(state)`` before acting for that episode. Agents with more
+        per-episode state (a station drawn at departure, ...) override both."""
+        return self.rng
+
+    def set_episode_state(self, state: Any) -> None:
+        """Make ``state`` (from :meth:`episode_state`) the current episode's."""
+        self.rng = state
+
+    def act_episodes(
+        self, obs: np.ndarray, states: Sequence[Any], explore: bool = False
+    ) -> tuple[np.ndarray, list[Any]]:
+        """Decide for ``k`` targets of different episodes due at the same time: observations
+        ``(k, 3m)`` and each episode's state; returns the actions and the updated states. The
+        result equals calling :meth:`act` for each in turn with its state current; agents with a
+        network override it with one forward pass."""
+        actions, out = [], []
+        for o, state in zip(np.asarray(obs), states, strict=True):
+            self.set_episode_state(state)
+            actions.append(self.act(o, explore))
+            out.append(self.episode_state())
+        return np.array(actions, dtype=np.int64), out
 
     def observe(self, transition: Transition) -> None:  # noqa: B027  (a hook: no-op by default)
         """Learning hook, called after every step while training; the heuristics ignore it."""

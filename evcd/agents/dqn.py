@@ -286,14 +286,21 @@ class DQNAgent(Agent):
 
     def act(self, obs: np.ndarray, explore: bool = False) -> int:
         """Epsilon-greedy if ``explore`` (draws from the episode's generator), else ``argmax Q``."""
-        if explore and self.config.exploration == "episode":
+        if explore and self.config.exploration == "episode" and self._episode_station not in (_UNDRAWN, None):
+            return int(self._episode_station)  # exploring this episode: no forward pass needed
+        return self._choose(int(self.q_values(np.asarray(obs)[None, :])[0].argmax()), explore)
+
+    def _choose(self, greedy: int, explore: bool) -> int:
+        """The action given the greedy one: the exploration draws of :meth:`act`."""
+        if not explore:
+            return greedy
+        if self.config.exploration == "episode":
             if self._episode_station == _UNDRAWN:  # the episode's first decision: explore it or not
                 draw, station = self.rng.random(), int(self.rng.integers(self.n_stations))
                 self._episode_station = station if draw < self.epsilon else None
-            if self._episode_station is not None:
-                return int(self._episode_station)
-            explore = False
-        return int(self.act_batch(np.asarray(obs)[None, :], explore)[0])
+            return greedy if self._episode_station is None else int(self._episode_station)
+        draw, station = self.rng.random(), int(self.rng.integers(self.n_stations))
+        return station if draw < self.epsilon else greedy
 
     def act_batch(self, obs: np.ndarray, explore: bool = False) -> np.ndarray:
         """:meth:`act` for a batch of observations ``(k, 3m)`` in one forward pass (slot exploration;
@@ -303,11 +310,28 @@ class DQNAgent(Agent):
             return greedy
         if self.config.exploration == "episode":
             raise ValueError("exploration='episode' decides per episode: call act() for each target")
-        eps = self.epsilon
-        k = len(greedy)
-        draws = self.rng.random(k)
-        randoms = self.rng.integers(self.n_stations, size=k)
-        return np.where(draws < eps, randoms, greedy)
+        return np.array([self._choose(int(g), True) for g in greedy], dtype=np.int64)
+
+    def episode_state(self) -> Any:
+        """The episode's generator and its exploration draw (episode exploration)."""
+        return (self.rng, self._episode_station)
+
+    def set_episode_state(self, state: Any) -> None:
+        """Restore :meth:`episode_state`."""
+        self.rng, self._episode_station = state
+
+    def act_episodes(
+        self, obs: np.ndarray, states: Sequence[Any], explore: bool = False
+    ) -> tuple[np.ndarray, list[Any]]:
+        """:meth:`act` for ``k`` targets of different episodes with one forward pass (see
+        :meth:`evcd.agents.base.Agent.act_episodes`)."""
+        greedy = self.q_values(obs).argmax(axis=-1)
+        actions, out = [], []
+        for g, state in zip(greedy, states, strict=True):
+            self.set_episode_state(state)
+            actions.append(self._choose(int(g), explore))
+            out.append(self.episode_state())
+        return np.array(actions, dtype=np.int64), out
 
     # ------------------------------------------------------------------ learning
     def observe(self, transition: Transition) -> None:

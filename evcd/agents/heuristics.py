@@ -31,6 +31,14 @@ class RandomAgent(Agent):
         super().begin_episode(rng)
         self.choice = None
 
+    def episode_state(self) -> Any:
+        """The episode's generator and its station (``None`` before the first decision)."""
+        return (self.rng, self.choice)
+
+    def set_episode_state(self, state: Any) -> None:
+        """Restore :meth:`episode_state`."""
+        self.rng, self.choice = state
+
     def act(self, obs: np.ndarray, explore: bool = False) -> int:
         """The station drawn at departure."""
         split_observation(obs, self.n_stations)  # a wrong-sized observation is a wiring bug: fail

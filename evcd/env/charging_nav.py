@@ -173,6 +173,26 @@ class ChargingNavEnv(gymnasium.Env):
         for day in range(len(self.days)):
             self.simulation.prepare(day)
 
+    def draw_episode(
+        self, rng: np.random.Generator, options: Mapping[str, Any] | None = None
+    ) -> tuple[int, TargetPlan]:
+        """The background day (an index into ``demand_seeds``) and the target's plan of an episode,
+        drawn from ``rng`` exactly as :meth:`reset` draws them from the generator of its seed, with
+        :meth:`reset`'s ``options`` applied (the batched engine, :mod:`evcd.env.batched`, calls
+        this too).
+
+        Raises:
+            ValueError: an unknown or invalid option.
+        """
+        options = dict(options or {})
+        unknown = sorted(set(options) - _OPTIONS)
+        if unknown:
+            raise ValueError(f"reset options {unknown} unknown; known: {sorted(_OPTIONS)}")
+        cfg = self.config
+        day = int(rng.integers(len(self.days)))
+        plan = draw_plan(rng, self.origins, cfg.departure_window, cfg.step_length, cfg.demand_config)
+        return self._override(day, plan, options)
+
     # ------------------------------------------------------------------ gymnasium API
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -180,14 +200,7 @@ class ChargingNavEnv(gymnasium.Env):
         """Start an episode: draw the target, position the simulation, wait for its insertion."""
         super().reset(seed=seed)
         rng = self.np_random
-        cfg = self.config
-        options = dict(options or {})
-        unknown = sorted(set(options) - _OPTIONS)
-        if unknown:
-            raise ValueError(f"reset options {unknown} unknown; known: {sorted(_OPTIONS)}")
-        day = int(rng.integers(len(self.days)))
-        plan = draw_plan(rng, self.origins, cfg.departure_window, cfg.step_length, cfg.demand_config)
-        day, plan = self._override(day, plan, options)
+        day, plan = self.draw_episode(rng, options)
         self._episode = None
         for attempt in range(2):
             try:

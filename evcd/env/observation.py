@@ -22,7 +22,7 @@ station's charging points (1 = all points busy, above 1 = a queue).
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -109,10 +109,22 @@ class RouteObserver:
         road: str,
         pos: float,
         at_station: int | None = None,
+        *,
+        others: Mapping[str, int] | None = None,
+        queued_at: int | None = None,
     ) -> Observation:
         """Observe from a target on ``road`` at lane position ``pos``.
 
-        ``at_station``: index of the station whose car park the target is in (waiting), if any.
+        Args:
+            api: the running simulation's API.
+            controller: the stations' queues.
+            road: the target's edge.
+            pos: its lane position.
+            at_station: index of the station whose car park the target is in (waiting), if any.
+            others: vehicles per edge not to count in ``N`` (the batched engine's other targets).
+            queued_at: a station whose ``Z`` counts the target although the controller does not
+                queue it (the batched engine's targets wait beside the queues, see
+                :mod:`evcd.env.ghost`).
         """
         m = len(self.stations)
         dist = np.empty(m)
@@ -125,10 +137,15 @@ class RouteObserver:
             dist[i] = d
             routes.append(edges)
         counts = self._edge_counts(api, {e for r in routes for e in r})
+        if others:
+            for e in counts.keys() & others.keys():
+                counts[e] -= others[e]
         vehicles = np.array([sum(counts[e] for e in r) for r in routes], dtype=np.int64)
         if at_station is None:  # the target itself drives on its road, which starts every route
             vehicles -= np.array([1 if r and road in r and counts[road] > 0 else 0 for r in routes])
         occupancy = np.array(controller.occupancies(), dtype=np.int64)
+        if queued_at is not None:
+            occupancy[queued_at] += 1
         return Observation(dist, vehicles, occupancy, tuple(routes), self.vector(dist, vehicles, occupancy))
 
     def vector(self, dist: np.ndarray, vehicles: np.ndarray, occupancy: np.ndarray) -> np.ndarray:

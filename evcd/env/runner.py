@@ -24,7 +24,7 @@ import itertools
 import logging
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol, Self
 
@@ -57,11 +57,14 @@ class EpisodeSpec:
         index: the episode's number in its run (the ``episode`` column of the rows).
         reset_seed: the ``env.reset`` seed: the target (departure, origin, battery) and its day.
         agent_seed: seeds the generator handed to the agent's ``begin_episode`` (exploration).
+        options: ``env.reset`` options fixing parts of the target (``departure``, ``origin``, ...;
+            tests and hand-made cases), or ``None``.
     """
 
     index: int
     reset_seed: int
     agent_seed: np.random.SeedSequence
+    options: Mapping[str, Any] | None = None
 
     def agent_rng(self) -> np.random.Generator:
         """A fresh generator for the agent's draws in this episode."""
@@ -219,7 +222,7 @@ class SingleEnvRunner(EpisodeRunner):
     def episode(self, spec: EpisodeSpec, agent: Policy, *, explore: bool, learn: bool) -> EpisodeRow:
         """Play one episode to its end; return its row."""
         t0 = time.perf_counter()
-        obs, info = self.env.reset(seed=spec.reset_seed)
+        obs, info = self.env.reset(seed=spec.reset_seed, options=spec.options)
         agent.begin_episode(spec.agent_rng())
         choices: list[int] = []
         total = 0.0

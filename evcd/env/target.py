@@ -100,40 +100,57 @@ class Target:
     Args:
         plan: its departure.
         route_id: a SUMO route id not used yet in this simulation (routes outlive loadState).
+        vehicle_id: its SUMO id (the single environment's :data:`TARGET_ID`; the batched engine
+            gives each co-simulated target its own).
+        vtype: its SUMO vehicle type.
+        battery: whether it carries a battery the charging controller queues (the single
+            environment's target does; the batched engine's do not: it queues them itself).
     """
 
-    def __init__(self, plan: TargetPlan, route_id: str) -> None:
+    def __init__(
+        self,
+        plan: TargetPlan,
+        route_id: str,
+        vehicle_id: str = TARGET_ID,
+        vtype: str = EV_TYPE,
+        battery: bool = True,
+    ) -> None:
         self.plan = plan
         self.route_id = route_id
+        self.vehicle_id = vehicle_id
+        self.vtype = vtype
+        self.battery = battery
         self.station: int | None = None  # current choice
         self.switches = 0  # how often the choice changed after the first
 
     def add(self, api: Any, controller: ChargingController) -> None:
         """Add the target to the simulation, departing at ``plan.departure`` (must not be past)."""
-        p = self.plan
+        p, vid = self.plan, self.vehicle_id
         api.route.add(self.route_id, [p.origin])
         api.vehicle.add(
-            TARGET_ID,
+            vid,
             self.route_id,
-            typeID=EV_TYPE,
+            typeID=self.vtype,
             depart=f"{p.departure:g}",
             departLane="best",
             departPos=f"{p.depart_pos:.2f}",
             departSpeed="0",
         )
-        api.vehicle.setParameter(TARGET_ID, "device.battery.capacity", f"{p.capacity_wh:.1f}")
-        api.vehicle.setParameter(TARGET_ID, "device.battery.chargeLevel", f"{p.capacity_wh * p.soc:.1f}")
-        api.vehicle.setParameter(TARGET_ID, HOLD_PARAM, "1")
-        controller.hold(TARGET_ID)
+        if not self.battery:
+            return
+        api.vehicle.setParameter(vid, "device.battery.capacity", f"{p.capacity_wh:.1f}")
+        api.vehicle.setParameter(vid, "device.battery.chargeLevel", f"{p.capacity_wh * p.soc:.1f}")
+        api.vehicle.setParameter(vid, HOLD_PARAM, "1")
+        controller.hold(vid)
 
     @staticmethod
-    def location(api: Any) -> tuple[str, float, float]:
+    def location(api: Any, vehicle_id: str = TARGET_ID) -> tuple[str, float, float]:
         """Its road (edge id, junction-internal ones start with ``:``), lane position and odometer (m).
 
         Raises a SUMO error if it is not in the simulation.
         """
         veh = api.vehicle
-        return veh.getRoadID(TARGET_ID), veh.getLanePosition(TARGET_ID), veh.getDistance(TARGET_ID)
+        return veh.getRoadID(vehicle_id), veh.getLanePosition(vehicle_id), veh.getDistance(vehicle_id)
 
     def drive_to(
         self,
@@ -154,20 +171,31 @@ class Target:
         if self.station is not None:
             self.switches += 1
         self.station = index
-        if controller.status(TARGET_ID) is not None:  # waiting in another car park: leave its queue
-            controller.release(api, TARGET_ID, time)
-            controller.hold(TARGET_ID)
+        vid = self.vehicle_id
+        if controller.status(vid) is not None:  # waiting in another car park: leave its queue
+            controller.release(api, vid, time)
+            controller.hold(vid)
         veh = api.vehicle
         if route and not route[0].startswith(":"):
-            veh.setRoute(TARGET_ID, route)  # drops the stop at the former station
+            veh.setRoute(vid, route)  # drops the stop at the former station
         else:  # on a junction: let SUMO route from the next edge
-            veh.changeTarget(TARGET_ID, station.edge)
+            veh.changeTarget(vid, station.edge)
+        self.stop_at(api, station, observer, road, pos, time)
+
+    def stop_at(
+        self, api: Any, station: Station, observer: RouteObserver, road: str, pos: float, time: float
+    ) -> None:
+        """Give the target its parking stop at ``station`` (looping back if it is too close to brake).
+
+        Raises a SUMO error if SUMO refuses every way of stopping there.
+        """
+        veh, vid = api.vehicle, self.vehicle_id
         try:
-            veh.setParkingAreaStop(TARGET_ID, station.parking_area, duration=STOP_DURATION_S)
+            veh.setParkingAreaStop(vid, station.parking_area, duration=STOP_DURATION_S)
         except SUMO_ERRORS as exc:  # past the car park, or too close to brake for it: loop back
             _, loop = observer.loop_route(api, road, pos, station)
-            log.debug("t=%s target cannot stop at %s now (%s); looping via %s", time, station.id, exc, loop)
+            log.debug("t=%s %s cannot stop at %s now (%s); looping via %s", time, vid, station.id, exc, loop)
             if not loop:
                 raise
-            veh.setRoute(TARGET_ID, loop)
-            veh.setParkingAreaStop(TARGET_ID, station.parking_area, duration=STOP_DURATION_S)
+            veh.setRoute(vid, loop)
+            veh.setParkingAreaStop(vid, station.parking_area, duration=STOP_DURATION_S)
