@@ -107,7 +107,9 @@ def plot_learning_curve(
     """Save a PNG of travel time per training episode (top) and station switches (bottom).
 
     Args:
-        runs: label -> the run's training rows (:class:`~evcd.env.runner.EpisodeRow`), in order.
+        runs: label -> the run's training rows (:class:`~evcd.env.runner.EpisodeRow`) in the order
+            they were played (the x axis is that order: the batched engine finishes episodes in
+            another order than their indices).
         path: PNG to write (atomically).
         window: episodes in the rolling mean drawn over the per-episode points.
         references: label -> a travel time drawn as a horizontal line (e.g. a rule's mean).
@@ -117,7 +119,7 @@ def plot_learning_curve(
     ax_t, ax_s = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1.2])
     colors = colormaps["tab10"](np.arange(max(1, len(runs))) % 10)
     for (label, rows), c in zip(runs.items(), colors, strict=False):
-        ep = np.array([r.episode for r in rows])
+        ep = np.arange(len(rows))  # the order played, not the episode index
         travel = np.array([r.travel_time for r in rows], dtype=np.float64)
         ok = np.array([not r.truncated for r in rows], dtype=bool)
         ax_t.scatter(ep[ok], travel[ok], s=6, color=c, alpha=0.25, linewidths=0)
@@ -134,7 +136,7 @@ def plot_learning_curve(
     ax_t.grid(alpha=0.3, which="both")
     ax_t.legend(fontsize=8, loc="upper right")
     ax_s.set_ylabel(f"switches per episode\n(mean of the last {window})")
-    ax_s.set_xlabel("training episode")
+    ax_s.set_xlabel("training episodes played")
     ax_s.grid(alpha=0.3)
     if title:
         ax_t.set_title(title)

@@ -43,7 +43,9 @@ def time_replay(
     sample_us, update_us = 1e6 * sample_s / iterations, 1e6 * update_s / iterations
     return {
         "replay_batch_us": sample_us + update_us,
-        "per_sample_update_us": (sample_us + update_us) / batch_size,
+        # the issues' name for the same figure: sample + priority update of one batch
+        "per_sample_update_us": sample_us + update_us,
+        "per_transition_us": (sample_us + update_us) / batch_size,
         "replay_sample_us": sample_us,
         "replay_update_us": update_us,
         "capacity": capacity,

@@ -4,9 +4,12 @@
     python scripts/bench.py --quick         # ends within about a minute (numbers are indicative)
     python scripts/bench.py --equivalence 50 --out equivalence.json   # fast vs paper |dT| only
     python scripts/bench.py --suite replay   # replay buffer only: sample + priority update (seconds)
+    python scripts/bench.py --suite throughput   # batched engine vs single env, learning, 2 processes
+    python scripts/bench.py --suite engines --episodes 200 --batch-sizes 25 100   # engine equivalence
 
-Every run also times the prioritized replay buffer: ``replay_batch_us`` (sample a batch of 32 from
-10,000 transitions and update its priorities) and ``per_sample_update_us`` (the same per transition).
+Every run also times the prioritized replay buffer: ``per_sample_update_us`` (sample a batch of 32
+from 10,000 transitions and update its priorities; also as ``replay_batch_us``) and
+``per_transition_us`` (the same per transition).
 
 ``--equivalence N`` runs N greedy episodes (departures 05:00-07:00) under both protocols and reports
 ``|T_fast - T_paper|``; the paper runs stop at charge start (``day_end=0``: what happens after the
@@ -25,6 +28,7 @@ import logging
 import sys
 from pathlib import Path
 
+from evcd import engine_bench
 from evcd.atomic import atomic_write_text
 from evcd.bench import run_bench
 from evcd.env.equivalence import compare_protocols
@@ -47,8 +51,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
-    p.add_argument("--suite", choices=("env", "replay"), default="env",
-                   help="env (default): episodes, SUMO, replay; replay: the replay buffer alone")  # fmt: skip
+    p.add_argument("--suite", choices=("env", "replay", "throughput", "engines"), default="env",
+                   help="env (default): episodes, SUMO, replay; replay: the replay buffer alone; "
+                        "throughput: the batched engine's speed; engines: batched vs single")  # fmt: skip
+    p.add_argument("--episodes", type=int, default=200, help="engines suite: episode seeds (default 200)")
+    p.add_argument("--batch-sizes", type=int, nargs="+", default=[25],
+                   help="engines suite: batch_episodes values to compare (default 25)")  # fmt: skip
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     if args.evs < 0 or args.fast_episodes < 1 or args.paper_episodes < 0:
@@ -60,13 +68,20 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     replay = time_replay()
     log.info("replay buffer: %.1f us per batch of 32 (sample + priority update), %.2f us per transition",
-             replay["replay_batch_us"], replay["per_sample_update_us"])  # fmt: skip
-    replay_summary = {**replay, "goals": {"replay_batch_us": "<= 100"}}
+             replay["per_sample_update_us"], replay["per_transition_us"])  # fmt: skip
+    replay_summary = {**replay, "goals": {"per_sample_update_us": "<= 100"}}
     if args.suite == "replay":
         atomic_write_text(args.out, json.dumps({"summary": replay_summary}, indent=1))
         log.info("wrote %s", args.out)
         return 0
     env_kwargs: dict = {"scenario": args.scenario, "evs": args.evs}
+    if args.suite in ("throughput", "engines"):
+        report = run_engine_suite(args, env_kwargs, replay)
+        atomic_write_text(args.out, json.dumps(report, indent=1))
+        for key, value in report["summary"].items():
+            log.info("%-30s %s", key, value)
+        log.info("wrote %s", args.out)
+        return 0
     if args.equivalence:
         window = (5 * 3600.0, 7 * 3600.0)
         diff = compare_protocols(
@@ -107,6 +122,59 @@ def main(argv: list[str] | None = None) -> int:
         log.info("%-45s %s", key, value)
     log.info("wrote %s", args.out)
     return 0
+
+
+def run_engine_suite(args: argparse.Namespace, env_kwargs: dict, replay: dict) -> dict:
+    """The batched engine's suites (Jurong West, the morning peak, the default training regime)."""
+    peak = {**env_kwargs, "departure_window": engine_bench.PEAK, "cache_dir": args.cache_dir}
+    if args.suite == "engines":
+        out = engine_bench.compare_engines(peak, args.episodes, args.batch_sizes)
+        return {"summary": out.pop("summary"), **out}
+    from evcd.agents.dqn import DQNAgent  # noqa: F401  (torch imported before timing)
+
+    learner = {
+        "hidden": [512, 256],
+        "lr": 1e-3,
+        "gamma": 0.9,
+        "target_update": 250,
+        "exploration": "episode",
+        "loss": "huber",
+        "reward_scale": 10.0,
+    }  # fmt: skip  (conf/experiment/peak.yaml)
+    peak_rates = engine_bench.engine_rates({**peak, "reward": "time"}, 20, 400, 25)
+    peak_100 = engine_bench.engine_rates({**peak, "reward": "time"}, 20, 400, 100)  # the faster setting
+    eval_run = engine_bench.engine_rates({**peak, "reward": "time"}, 1, 100, 25)["batched"]
+    day = {**peak, "departure_window": engine_bench.WHOLE_DAY}
+    day_rates = engine_bench.engine_rates(day, 10, 400, 25)
+    learning = engine_bench.learning_rate({**peak, "reward": "time"}, learner, 1000, 25)
+    scaling = engine_bench.parallel_scaling(peak, 200, 25)
+    train_episodes = 3000  # conf/experiment/peak.yaml
+    estimate = engine_bench.table_minutes(
+        eval_run_s=eval_run["wall_s"],
+        hindsight_run_s=500 / peak_rates["batched"]["episodes_per_s"],
+        train_run_s=train_episodes / learning["episodes_per_s"],
+        scaling=scaling["scaling"],
+        day_build_s=30.0,
+    )
+
+    def speedup(r: dict) -> float:
+        return r["batched"]["episodes_per_s"] / r["single"]["episodes_per_s"]
+
+    summary = {
+        "batched_speedup": speedup(peak_rates),
+        "batched_speedup_batch100": speedup(peak_100),
+        "batched_speedup_whole_day": speedup(day_rates),
+        "transitions_per_second": learning["transitions_per_s"],
+        "parallel_scaling_2": scaling["scaling"],
+        "per_sample_update_us": replay["per_sample_update_us"],
+        "table_minutes_estimate": estimate,
+        "eval_run_100_s": eval_run["wall_s"],
+        "train_episodes_per_second": learning["episodes_per_s"],
+        "goals": {"batched_speedup": ">= 10 (aim 30)", "parallel_scaling_2": ">= 1.7",
+                  "per_sample_update_us": "<= 100", "table_minutes_estimate": "<= 60 (aim 15)"},
+    }  # fmt: skip
+    return {"summary": summary, "peak": peak_rates, "peak_batch100": peak_100, "whole_day": day_rates,
+            "learning": learning, "scaling": scaling, "replay": replay}  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ from evcd.agents.dqn import checkpoint_agent_config
 from evcd.checkpoint import CheckpointError
 from evcd.config_utils import agent_params, check_integer, env_kwargs
 from evcd.env import ChargingNavEnv
+from evcd.env.batched import ENGINES, make_runner
 from evcd.evaluate import agent_rng, evaluate, write_episodes_csv, write_results_json
 from evcd.scenario_report import format_table
 
@@ -50,6 +51,9 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
                              "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
         params["checkpoint"] = to_absolute_path(str(params["checkpoint"]))
         params = {**checkpoint_agent_config(params["checkpoint"]), **params}
+    batch = check_integer(cfg.batch_episodes, "batch_episodes", 1)
+    if cfg.engine not in ENGINES:
+        raise ValueError(f"engine={cfg.engine!r}: must be one of {', '.join(ENGINES)}")
     files = [out_dir / EPISODES_CSV, out_dir / RESULTS_JSON]
     for path in files:
         if path.exists():
@@ -58,11 +62,12 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     agent = make_agent_for_env(name, env, agent_rng(seed), **params)
     log.info("%s on %s, evs=%s, %d episodes, seed %d", agent, env.scenario.root, cfg.evs, episodes, seed)
 
+    runner = make_runner(env, str(cfg.engine), batch)
     try:
-        env.prepare()  # build the day snapshots now, so that no episode's wall time includes them
-        result = evaluate(env, agent, episodes, seed, progress=bool(cfg.progress), resamples=resamples)
+        runner.prepare()  # build the day snapshots now, so that no episode's wall time includes them
+        result = evaluate(runner, agent, episodes, seed, progress=bool(cfg.progress), resamples=resamples)
     finally:
-        env.close()
+        runner.close()
 
     write_episodes_csv(result, files[0])
     write_results_json(result, files[1], config=OmegaConf.to_container(cfg, resolve=True))

@@ -51,6 +51,16 @@ def episode(self, spec, agent, **kw):
     return _episode(self, spec, agent, **kw)
 runner.SingleEnvRunner.episode = episode
 """
+# the batched engine: SIGKILL as the 4th training episode (index 3) is first decided
+KILL_MID_BATCH = """
+import evcd.env.batched as batched
+_decide = batched._Batch._decide
+def decide(self, due, now):
+    if self.learn and any(live.spec.index == {when} for live in due):
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _decide(self, due, now)
+batched._Batch._decide = decide
+"""
 # SIGKILL half-way through writing the checkpoint file with this index (its temporary file is left)
 KILL_MID_WRITE = """
 import tempfile
@@ -221,28 +231,35 @@ def test_a_rule_agent_goes_through_the_same_script(small, tmp_path):
     assert data["paired_vs_baseline"] is not None
 
 
-@pytest.fixture(scope="module")
-def uninterrupted(small, tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("reference") / "run"
+def reference_run(small: list[str], out: Path, engine: str) -> Path:
     proc = run_train(*small, "agent=dueling_ddqn", "train.episodes=6", "train.checkpoint_every=2",
-                     f"hydra.run.dir={out}")  # fmt: skip
+                     f"engine={engine}", f"hydra.run.dir={out}")  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out
 
 
+@pytest.fixture(scope="module")
+def uninterrupted(small, tmp_path_factory) -> Path:
+    return reference_run(small, tmp_path_factory.mktemp("reference") / "run", "batched")
+
+
 @pytest.mark.parametrize(
-    "patch,checkpoint",
-    [(KILL_MID_EPISODE.format(when=3), 2),  # killed in the 4th training episode: resumes after episode 2
-     (KILL_MID_WRITE.format(when=2), 2)],  # killed writing the checkpoint after episode 4: resumes after 2
-    ids=["mid-episode", "mid-checkpoint-write"],
+    "patch,checkpoint,engine",
+    [(KILL_MID_BATCH.format(when=3), 2, "batched"),  # killed in the 4th training episode: resumes after 2
+     (KILL_MID_EPISODE.format(when=3), 2, "single"),
+     (KILL_MID_WRITE.format(when=2), 2, "batched")],  # killed writing the checkpoint after episode 4
+    ids=["mid-episode", "mid-episode-single-engine", "mid-checkpoint-write"],
 )  # fmt: skip
-def test_a_killed_run_resumes_to_the_same_result(small, uninterrupted, tmp_path, patch, checkpoint):
+def test_a_killed_run_resumes_to_the_same_result(small, uninterrupted, tmp_path, patch, checkpoint, engine):
     out = tmp_path / "run"
+    if engine != "batched":
+        uninterrupted = reference_run(small, tmp_path / "reference", engine)
     args = [
         *small,
         "agent=dueling_ddqn",
         "train.episodes=6",
         "train.checkpoint_every=2",
+        f"engine={engine}",
         f"hydra.run.dir={out}",
     ]
     killed = run_train(*args, patch=patch)
@@ -290,6 +307,8 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("eval.baseline=dqn", "eval.baseline='dqn'"),
         ("resume=true", "no checkpoint"),
         ("agent.checkpoint=x.pt", "agent.checkpoint"),
+        ("engine=fast", "engine='fast'"),
+        ("batch_episodes=0", "batch_episodes=0"),
     ],
 )
 def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
@@ -299,6 +318,21 @@ def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
     log = proc.stdout + proc.stderr
     assert needle in log
     assert "simulating the day" not in log and not (out / "results.json").exists()
+
+
+def test_single_and_batched_engines_play_the_same_episodes(small, tmp_path):
+    rows = {}
+    for engine in ("single", "batched"):
+        out = tmp_path / engine
+        proc = run_train(
+            *small, "agent=greedy", "eval.episodes=6", f"engine={engine}", f"hydra.run.dir={out}"
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        rows[engine] = read_csv(out / "episodes.csv")
+    key = ("episode", "seed", "departure", "origin", "day")
+    assert [[r[k] for k in key] for r in rows["single"]] == [[r[k] for k in key] for r in rows["batched"]]
+    t = {e: [float(r["travel_time"]) for r in rows[e]] for e in rows}
+    assert sum(abs(a - b) for a, b in zip(t["single"], t["batched"], strict=True)) <= 0.05 * sum(t["single"])
 
 
 def test_unknown_experiment_lists_the_known_ones(tmp_path):

@@ -135,3 +135,27 @@ class QueueAwareAgent(Agent):
     def act(self, obs: np.ndarray, explore: bool = False) -> int:
         """The station with the smallest :meth:`estimate`."""
         return int(np.argmin(self.estimate(obs)))
+
+
+class FixedStationAgent(Agent):
+    """Always the same station (the building block of the best station in hindsight).
+
+    Args:
+        n_stations: number of stations.
+        rng: unused (the interface's).
+        station: the station index.
+    """
+
+    name = "fixed"
+
+    def __init__(self, n_stations: int, rng: np.random.Generator, station: int = 0) -> None:
+        super().__init__(n_stations, rng)
+        is_int = isinstance(station, int | np.integer) and not isinstance(station, bool)
+        if not is_int or not 0 <= station < n_stations:
+            raise ValueError(f"station={station!r}: must be a station index in [0, {n_stations})")
+        self.station = int(station)
+
+    def act(self, obs: np.ndarray, explore: bool = False) -> int:
+        """The fixed station."""
+        split_observation(obs, self.n_stations)
+        return self.station

@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import Any
 
 import libsumo
+from tqdm.auto import tqdm
 
 import evcd
 from evcd.atomic import atomic_write_text
@@ -69,6 +70,9 @@ ROUTES = "routes.rou.xml.gz"
 _CHUNK = 1 << 20
 _ENTRY_FIELDS = {"state", "state_sha256", "controller", "controller_sha256"}
 # the modules whose behaviour shapes a cached day: editing one invalidates the cache
+_told = [False]  # whether the one-time explanation of a day build was logged in this process
+# a progress bar over simulated time (of day) with the wall time left
+_BAR = "{desc}: {percentage:3.0f}% of {total:.0f} sim s [{elapsed}<{remaining}]"
 _CODE = ("scenario/demand.py", "scenario/routing.py", "sim/charging.py", "sim/driver.py", "sim/snapshots.py")
 
 
@@ -378,7 +382,7 @@ class DayCache:
         self._write_manifest(manifest)  # new routes: every older snapshot is void
         return manifest
 
-    def _build(self, manifest: dict[str, Any], missing: list[float]) -> None:
+    def _build(self, manifest: dict[str, Any], missing: list[float], progress: bool = True) -> None:
         if not self._valid_routes(manifest):
             manifest = self._write_routes() if self.spec.route_file is None else {"snapshots": {}}
         if SumoDriver.active() is not None:
@@ -389,10 +393,21 @@ class DayCache:
         log.info(
             "day cache %s: simulating the day to %.0f s for %d snapshots", self.dir, missing[-1], len(missing)
         )
-        with self.make_driver() as driver:
+        if not _told[0]:
+            _told[0] = True
+            log.warning(
+                "simulating a background day once to cache its snapshots (a few minutes per day, only "
+                "the first time a day is used; later runs load them): %s", self.dir.parent,
+            )  # fmt: skip
+        with (
+            self.make_driver() as driver,
+            tqdm(total=missing[-1], unit="sim s", desc="background day", mininterval=2.0,
+                 disable=not progress, bar_format=_BAR) as bar,
+        ):  # fmt: skip
             driver.add_listener(controller.update)
             for t in missing:
                 driver.step(until=t)
+                bar.update(t - bar.n)
                 name = _tkey(t)
                 state = driver.save_state(self.dir / f"state_{name}.xml.gz")
                 ctrl = atomic_write_text(

@@ -163,3 +163,16 @@ def test_parallel_processes_build_a_day_once(small_scenario, tmp_path):
     with ctx.Pool(2) as pool:
         built = pool.starmap(_ensure_in_child, [(str(small_scenario.root), str(tmp_path))] * 2)
     assert sorted(map(len, built)) == [0, len(TIMES)]  # one built, the other waited and reused
+
+
+def test_a_build_says_once_what_it_is_and_shows_its_progress(spec, tmp_path, caplog, capsys, monkeypatch):
+    import evcd.sim.snapshots as snapshots
+
+    monkeypatch.setattr(snapshots, "_told", [False])
+    with caplog.at_level("WARNING", logger="evcd.sim.snapshots"):
+        DayCache(spec, tmp_path / "a").ensure(TIMES)
+        DayCache(spec, tmp_path / "b").ensure(TIMES)  # another build in the same process: no repeat
+    told = [r.getMessage() for r in caplog.records if "only the first time" in r.getMessage()]
+    assert len(told) == 1 and str(tmp_path / "a") in told[0]
+    err = capsys.readouterr().err
+    assert "background day" in err and f"{TIMES[-1]:.0f} sim s" in err
