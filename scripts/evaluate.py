@@ -28,7 +28,7 @@ from evcd.agents.dqn import checkpoint_agent_config
 from evcd.checkpoint import CheckpointError
 from evcd.config_utils import agent_params, check_integer, env_kwargs
 from evcd.env import ChargingNavEnv
-from evcd.env.batched import ENGINES, make_runner
+from evcd.env.batched import check_engine, make_runner
 from evcd.evaluate import agent_rng, evaluate, write_episodes_csv, write_results_json
 from evcd.scenario_report import format_table
 
@@ -51,9 +51,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
                              "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
         params["checkpoint"] = to_absolute_path(str(params["checkpoint"]))
         params = {**checkpoint_agent_config(params["checkpoint"]), **params}
-    batch = check_integer(cfg.batch_episodes, "batch_episodes", 1)
-    if cfg.engine not in ENGINES:
-        raise ValueError(f"engine={cfg.engine!r}: must be one of {', '.join(ENGINES)}")
+    engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
     files = [out_dir / EPISODES_CSV, out_dir / RESULTS_JSON]
     for path in files:
         if path.exists():
@@ -62,7 +60,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     agent = make_agent_for_env(name, env, agent_rng(seed), **params)
     log.info("%s on %s, evs=%s, %d episodes, seed %d", agent, env.scenario.root, cfg.evs, episodes, seed)
 
-    runner = make_runner(env, str(cfg.engine), batch)
+    runner = make_runner(env, engine, batch)
     try:
         runner.prepare()  # build the day snapshots now, so that no episode's wall time includes them
         result = evaluate(runner, agent, episodes, seed, progress=bool(cfg.progress), resamples=resamples)

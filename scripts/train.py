@@ -29,7 +29,7 @@ from evcd.agents import agent_class, make_agent_for_env
 from evcd.checkpoint import CheckpointError
 from evcd.config_utils import agent_params, check_integer, env_kwargs
 from evcd.env import ChargingNavEnv
-from evcd.env.batched import ENGINES, make_runner
+from evcd.env.batched import check_engine, make_runner
 from evcd.evaluate import AGENT_STREAM, agent_rng
 from evcd.train import TrainSettings, train_and_evaluate
 
@@ -55,9 +55,7 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         resamples=check_integer(cfg.eval.bootstrap_resamples, "eval.bootstrap_resamples", 1),
     )
     check_integer(cfg.torch_threads, "torch_threads", 1)
-    batch = check_integer(cfg.batch_episodes, "batch_episodes", 1)
-    if cfg.engine not in ENGINES:
-        raise ValueError(f"engine={cfg.engine!r}: must be one of {', '.join(ENGINES)}")
+    engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
     name, params = agent_params(cfg)
     if agent_class(name).learns and settings.episodes < 1:
         raise ValueError(f"train.episodes={settings.episodes}: agent {name!r} learns, so it needs >= 1")
@@ -85,7 +83,7 @@ def build(cfg: DictConfig) -> dict[str, Any]:
             raise ValueError(f"eval.baseline={cfg.eval.baseline!r}: must be a rule (random, greedy, "
                              "queue_aware)")  # fmt: skip
     return {"settings": settings, "agent": agent, "baseline": baseline, "envs": envs,
-            "runner": lambda phase: make_runner(envs[phase], str(cfg.engine), batch)}  # fmt: skip
+            "runner": lambda phase: make_runner(envs[phase], engine, batch)}  # fmt: skip
 
 
 def train(cfg: DictConfig) -> float:

@@ -145,10 +145,7 @@ class BatchedRunner(EpisodeRunner):
     """
 
     def __init__(self, env: ChargingNavEnv, batch_episodes: int = DEFAULT_BATCH_EPISODES) -> None:
-        if isinstance(batch_episodes, bool) or not isinstance(batch_episodes, int | np.integer):
-            raise ValueError(f"batch_episodes={batch_episodes!r}: must be an integer >= 1")
-        if batch_episodes < 1:
-            raise ValueError(f"batch_episodes={batch_episodes}: must be an integer >= 1")
+        _, batch_episodes = check_engine("batched", batch_episodes)
         if not isinstance(env.unwrapped, ChargingNavEnv):
             raise ValueError(f"the batched engine needs a ChargingNavEnv, not {type(env.unwrapped).__name__}")
         self.env = env.unwrapped
@@ -184,8 +181,10 @@ class BatchedRunner(EpisodeRunner):
 
     def batches_of(self, specs: Sequence[EpisodeSpec]) -> list[list[int]]:
         """The positions in ``specs`` of each batch: by day, then departure, ``batch_episodes`` each."""
-        plans = self.plan(specs)
-        order = sorted(range(len(specs)), key=lambda i: (plans[i][0], plans[i][1].departure, i))
+        return self._batches(self.plan(specs))
+
+    def _batches(self, plans: Sequence[tuple[int, TargetPlan]]) -> list[list[int]]:
+        order = sorted(range(len(plans)), key=lambda i: (plans[i][0], plans[i][1].departure, i))
         out: list[list[int]] = []
         for _, group in itertools.groupby(order, key=lambda i: plans[i][0]):
             members = list(group)
@@ -218,10 +217,11 @@ class BatchedRunner(EpisodeRunner):
             if on_episode is not None:
                 on_episode(row)
 
-        for members in self.batches_of(specs):
+        draws = [self._draw(spec) for spec in specs]  # each plan once; its rng redraws origins
+        for members in self._batches([(day, plan) for _, day, plan in draws]):
             batch = []
             for i in members:
-                rng, day, plan = self._draw(specs[i])
+                rng, day, plan = draws[i]
                 target = Target(plan, self._route_id(), self._vehicle_id(), TARGET_VTYPE, battery=False)
                 batch.append(_Live(i, specs[i], rng, day, target))
             _Batch(self, batch, agent, explore, learn, finished).run()
@@ -596,6 +596,20 @@ class _Batch:
         live.phase = _REENTERING
 
 
+def check_engine(engine: Any, batch_episodes: Any) -> tuple[str, int]:
+    """``(engine, batch_episodes)`` checked without starting anything.
+
+    Raises:
+        ValueError: an unknown engine or a batch size that is not an integer >= 1.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine={engine!r}: must be one of {', '.join(ENGINES)}")
+    is_int = isinstance(batch_episodes, int | np.integer) and not isinstance(batch_episodes, bool)
+    if not is_int or batch_episodes < 1:
+        raise ValueError(f"batch_episodes={batch_episodes!r}: must be an integer >= 1")
+    return str(engine), int(batch_episodes)
+
+
 def make_runner(env: ChargingNavEnv, engine: str = "batched", batch_episodes: int = DEFAULT_BATCH_EPISODES
                 ) -> EpisodeRunner:  # fmt: skip
     """The runner ``engine`` names over ``env``: ``"batched"`` (:class:`BatchedRunner`) or
@@ -604,8 +618,5 @@ def make_runner(env: ChargingNavEnv, engine: str = "batched", batch_episodes: in
     Raises:
         ValueError: an unknown engine or a bad ``batch_episodes``.
     """
-    if engine == "single":
-        return SingleEnvRunner(env)
-    if engine == "batched":
-        return BatchedRunner(env, batch_episodes)
-    raise ValueError(f"engine={engine!r}: must be one of {', '.join(ENGINES)}")
+    engine, batch_episodes = check_engine(engine, batch_episodes)
+    return SingleEnvRunner(env) if engine == "single" else BatchedRunner(env, batch_episodes)
