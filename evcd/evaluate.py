@@ -89,6 +89,8 @@ class EvalResult:
     seed: int
     rows: tuple[EpisodeRow, ...]
     summary: EvalSummary
+    #: the agent's :meth:`~evcd.agents.Agent.report` (e.g. hindsight's station per episode)
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------- seeds
@@ -276,15 +278,15 @@ def evaluate(
         specs = episode_specs(seed, range(int(episodes)))
     elif len(specs) != episodes:
         raise ValueError(f"episodes={episodes} but {len(specs)} specs given")
-    bar = EpisodeProgress(len(specs), f"evaluate {agent.name}", progress)
+    bar = EpisodeProgress(len(specs) * agent.runs_per_episode, f"evaluate {agent.name}", progress)
     try:
-        rows = as_runner(env).run(specs, agent, explore=False, learn=False, on_episode=bar)
+        rows = agent.play(as_runner(env), specs, explore=False, learn=False, on_episode=bar)
     finally:
         bar.close()
     for row in rows:
         log.debug("episode %d: %s", row.episode, row)
     summary = summarize(rows, bootstrap_rng(seed), resamples)
-    return EvalResult(agent=agent.name, seed=seed, rows=tuple(rows), summary=summary)
+    return EvalResult(agent=agent.name, seed=seed, rows=tuple(rows), summary=summary, extra=agent.report())
 
 
 # ---------------------------------------------------------------------------------------- writers
@@ -347,7 +349,8 @@ def _json_safe(value: Any) -> Any:
 
 
 def results_dict(result: EvalResult, config: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The content of ``results.json``: agent, seed, summary, per-episode rows, optional config."""
+    """The content of ``results.json``: agent, seed, summary, per-episode rows, optional config, and
+    the agent's own extras (:attr:`EvalResult.extra`, e.g. ``hindsight``)."""
     return _json_safe(
         {
             "agent": result.agent,
@@ -355,6 +358,7 @@ def results_dict(result: EvalResult, config: Mapping[str, Any] | None = None) ->
             "summary": dataclasses.asdict(result.summary),
             "episodes": [dataclasses.asdict(r) for r in result.rows],
             "config": dict(config) if config is not None else None,
+            **result.extra,
         }
     )
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 from evcd.agents import agent_class, make_agent_for_env
 from evcd.agents.dqn import checkpoint_agent_config
 from evcd.checkpoint import CheckpointError
-from evcd.config_utils import agent_params, check_integer, env_kwargs
+from evcd.config_utils import agent_params, check_integer, env_kwargs, stop_on_bad_setting
 from evcd.env import ChargingNavEnv
 from evcd.env.batched import check_engine, make_runner
 from evcd.evaluate import agent_rng, evaluate, write_episodes_csv, write_results_json
@@ -88,13 +87,13 @@ def _brief(row: Any) -> dict[str, Any]:
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="evaluate")
 def main(cfg: DictConfig) -> float:
-    """Hydra entry point; returns the mean travel time (for sweepers)."""
+    """Hydra entry point; returns the mean travel time (for sweepers). A bad setting exits with code 2,
+    or in a multirun fails only its own job (:func:`~evcd.config_utils.stop_on_bad_setting`)."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     try:
         return run(cfg, out_dir)["mean_travel_time"]
     except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
-        log.error("%s", exc)
-        sys.exit(2)
+        stop_on_bad_setting(exc, log)
 
 
 if __name__ == "__main__":

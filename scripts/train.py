@@ -4,18 +4,21 @@
     python scripts/train.py -m agent=dqn,dueling_ddqn evs=200,300,400          # one run directory per job
     python scripts/train.py agent=dqn experiment=paper                          # the paper's protocol
     python scripts/train.py agent=greedy                                        # rules: evaluation only
+    python scripts/train.py agent=hindsight                                     # best station in hindsight
+    python scripts/train.py -m experiment=table agent=random,greedy,queue_aware,hindsight,dqn,dueling_ddqn \
+        seed=0,1,2,3,4 evs=200,300,400                                          # the results table (joblib)
     python scripts/train.py resume=true hydra.run.dir=outputs/train/<run>       # continue a run
     tensorboard --logdir outputs/
 
 Everything is in ``conf/train.yaml`` (and ``conf/experiment/``); see :mod:`evcd.train` for what a
-run does and writes. Bad settings stop the run with exit code 2 and a message naming the value,
-before SUMO starts.
+run does and writes; ``scripts/make_table.py`` turns a sweep into the results table. Bad settings
+stop the run with exit code 2 and a message naming the value, before SUMO starts (in a multirun
+only that job fails; the others run, then the sweep exits with code 1).
 """
 
 from __future__ import annotations
 
 import logging
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class, make_agent_for_env
 from evcd.checkpoint import CheckpointError
-from evcd.config_utils import agent_params, check_integer, env_kwargs
+from evcd.config_utils import agent_params, check_integer, env_kwargs, stop_on_bad_setting
 from evcd.env import ChargingNavEnv
 from evcd.env.batched import check_engine, make_runner
 from evcd.evaluate import AGENT_STREAM, agent_rng
@@ -139,12 +142,12 @@ def report_lines(result: Any, evs: int) -> list[str]:
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="train")
 def main(cfg: DictConfig) -> float:
-    """Hydra entry point; exits with code 2 on a bad setting."""
+    """Hydra entry point; a bad setting exits with code 2, or in a multirun fails only its own job
+    (:func:`~evcd.config_utils.stop_on_bad_setting`)."""
     try:
         return train(cfg)
     except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
-        log.error("%s", exc)
-        sys.exit(2)
+        stop_on_bad_setting(exc, log)
 
 
 if __name__ == "__main__":

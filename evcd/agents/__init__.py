@@ -24,6 +24,7 @@ _REGISTRY: dict[str, tuple[str, dict[str, Any]]] = {
     "random": ("evcd.agents.heuristics:RandomAgent", {}),
     "greedy": ("evcd.agents.heuristics:GreedyAgent", {}),
     "queue_aware": ("evcd.agents.heuristics:QueueAwareAgent", {}),
+    "hindsight": ("evcd.agents.heuristics:HindsightAgent", {}),
     "dqn": ("evcd.agents.dqn:DQNAgent", {"double": False, "dueling": False}),
     "dueling_ddqn": ("evcd.agents.dqn:DQNAgent", {"double": True, "dueling": True}),
 }

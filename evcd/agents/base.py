@@ -15,12 +15,12 @@ replaced per episode), never the global one, so a run is reproducible from its s
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, Self
 
 import numpy as np
 
-from evcd.env.runner import Transition
+from evcd.env.runner import EpisodeRow, EpisodeRunner, EpisodeSpec, Transition
 
 
 def split_observation(obs: np.ndarray, n_stations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -122,6 +122,32 @@ class Agent(ABC):
             actions.append(self.act(o, explore))
             out.append(self.episode_state())
         return np.array(actions, dtype=np.int64), out
+
+    # ------------------------------------------------------------------ how the agent is played
+    @property
+    def runs_per_episode(self) -> int:
+        """Runs of an episode that :meth:`play` makes (one for a policy)."""
+        return 1
+
+    def play(
+        self,
+        runner: EpisodeRunner,
+        specs: Sequence[EpisodeSpec],
+        explore: bool = False,
+        learn: bool = False,
+        on_episode: Callable[[EpisodeRow], None] | None = None,
+    ) -> list[EpisodeRow]:
+        """Play the episodes ``specs`` through ``runner``; one row per spec, in spec order.
+
+        A policy is simply run (``runner.run``). Agents that are not a policy but a measurement
+        built from several runs of each episode (the hindsight bound) override it; ``on_episode``
+        then sees every run (:attr:`runs_per_episode` per episode).
+        """
+        return runner.run(specs, self, explore=explore, learn=learn, on_episode=on_episode)
+
+    def report(self) -> dict[str, Any]:
+        """Extra results of the latest :meth:`play` for ``results.json`` (key -> plain values)."""
+        return {}
 
     def observe(self, transition: Transition) -> None:  # noqa: B027  (a hook: no-op by default)
         """Learning hook, called after every step while training; the heuristics ignore it."""

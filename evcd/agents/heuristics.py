@@ -1,4 +1,5 @@
-"""Rule-based dispatchers: the paper's Random and Greedy baselines and a queue-aware heuristic.
+"""Rule-based dispatchers: the paper's Random and Greedy baselines and a queue-aware heuristic; the
+fixed-station policies and the best station in hindsight built from them (a bound, not a policy).
 
 All of them read the observation ``[D, N, Z]`` of :mod:`evcd.env.observation`. Normalisation
 (``normalize_obs=True``) divides ``D`` by a constant (m -> km), so Greedy's argmin is the same with or
@@ -7,13 +8,15 @@ without it; the queue-aware heuristic undoes the scaling (it is told whether it 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from evcd.agents.base import Agent, split_observation
 from evcd.env.observation import D_SCALE_M, N_SCALE
+from evcd.env.runner import EpisodeRow, EpisodeRunner, EpisodeSpec
 
 
 class RandomAgent(Agent):
@@ -159,3 +162,100 @@ class FixedStationAgent(Agent):
         """The fixed station."""
         split_observation(obs, self.n_stations)
         return self.station
+
+
+def best_in_hindsight(by_station: Sequence[Sequence[EpisodeRow]]) -> list[EpisodeRow]:
+    """Per episode, the row of the station with the shortest travel time among the runs that ended
+    charging (ties: the lowest station index); an episode no station charged in keeps station 0's
+    (truncated) row. ``by_station[s][i]`` is episode ``i`` driven to station ``s`` all the way; each
+    kept row's ``wall_s`` becomes the sum over the stations (what the bound cost).
+
+    Raises:
+        ValueError: no stations, or the stations' rows are not the same episodes in the same order.
+    """
+    if not by_station:
+        raise ValueError("best_in_hindsight: no station runs given")
+    seeds = [r.seed for r in by_station[0]]
+    for s, rows in enumerate(by_station):
+        if [r.seed for r in rows] != seeds:
+            raise ValueError(f"best_in_hindsight: station {s}'s runs are not the same episodes as "
+                             "station 0's")  # fmt: skip
+    best = []
+    for runs in zip(*by_station, strict=True):
+        charged = [r for r in runs if not r.truncated]
+        row = min(charged, key=lambda r: r.travel_time) if charged else runs[0]
+        best.append(dataclasses.replace(row, wall_s=float(sum(r.wall_s for r in runs))))
+    return best
+
+
+class HindsightAgent(Agent):
+    """The best station in hindsight: each episode is driven to every station with no further
+    decision (:class:`FixedStationAgent` on the same episode seed), and the shortest travel time
+    is kept (:func:`best_in_hindsight`). It knows the future, so it is a bound on what a dispatcher
+    that picks stations can expect, not a policy: it has no :meth:`act`, only :meth:`play`. Its
+    rows name the best station (``station``, ``station_id``); :meth:`report` adds every station's
+    travel time per episode.
+
+    Args:
+        n_stations: number of stations.
+        rng: unused (the fixed-station runs are deterministic given the episode seeds).
+    """
+
+    name = "hindsight"
+
+    def __init__(self, n_stations: int, rng: np.random.Generator) -> None:
+        super().__init__(n_stations, rng)
+        self.by_station: list[list[EpisodeRow]] = []
+
+    @property
+    def runs_per_episode(self) -> int:
+        """One run per station."""
+        return self.n_stations
+
+    def act(self, obs: np.ndarray, explore: bool = False) -> int:
+        """Refused: the bound is measured by :meth:`play`, not by acting on observations."""
+        raise RuntimeError("hindsight is a bound, not a policy: play it through a runner (agent.play, "
+                           "evcd.evaluate.evaluate), which drives every episode to each station")  # fmt: skip
+
+    def play(
+        self,
+        runner: EpisodeRunner,
+        specs: Sequence[EpisodeSpec],
+        explore: bool = False,
+        learn: bool = False,
+        on_episode: Callable[[EpisodeRow], None] | None = None,
+    ) -> list[EpisodeRow]:
+        """Run ``specs`` once per station with :class:`FixedStationAgent`, keep the best per episode.
+
+        Raises:
+            ValueError: ``learn`` is set (the bound does not learn).
+        """
+        if learn:
+            raise ValueError("hindsight does not learn: play it with learn=False")
+        self.by_station = [
+            runner.run(specs, FixedStationAgent(self.n_stations, self.rng, s), explore=False, learn=False,
+                       on_episode=on_episode)
+            for s in range(self.n_stations)
+        ]  # fmt: skip
+        return best_in_hindsight(self.by_station)
+
+    def report(self) -> dict[str, Any]:
+        """Per episode (in spec order) the best station and every station's travel time
+        (``None`` where that run was truncated), and per station its mean over charged runs."""
+        if not self.by_station:
+            return {}
+        best = best_in_hindsight(self.by_station)
+        runs_of = zip(*self.by_station, strict=True)
+        times = [[None if r.truncated else r.travel_time for r in runs] for runs in runs_of]
+        means = []
+        for rows in self.by_station:
+            charged = [r.travel_time for r in rows if not r.truncated]
+            means.append(float(np.mean(charged)) if charged else None)
+        return {
+            "hindsight": {
+                "best_station": [None if r.truncated else r.station for r in best],
+                "travel_time_by_station": times,
+                "mean_by_station": means,
+                "truncated_by_station": [sum(r.truncated for r in rows) for rows in self.by_station],
+            }
+        }
