@@ -352,3 +352,18 @@ def test_a_corrupted_checkpoint_is_reported_on_resume(small, uninterrupted, tmp_
     proc = run_train(*small, "agent=dueling_ddqn", "train.episodes=6", "train.checkpoint_every=2",
                      "resume=true", f"hydra.run.dir={out}")  # fmt: skip
     assert proc.returncode == 2 and "truncated" in proc.stdout + proc.stderr
+
+
+def test_the_table_experiment_runs_without_a_baseline_in_the_calibrated_world(small, tmp_path):
+    cfg = compose_train("experiment=table")
+    assert cfg.regime == "table" and cfg.eval.baseline is None
+    assert cfg.scenario.charging_points == 1 and cfg.scenario.path == "sumo_net/jurong_west"
+    assert list(cfg.env.departure_window) == [0.0, 86400.0] and cfg.env.max_travel_time == 14400.0
+    assert not set(cfg.train.days) & set(cfg.eval.days)
+    out = tmp_path / "run"
+    proc = run_train("experiment=table", *small, "agent=greedy", f"hydra.run.dir={out}")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    data = json.loads((out / "results.json").read_text())
+    assert data["config"]["regime"] == "table" and data["config"]["scenario"]["charging_points"] == 1
+    assert "baseline" not in data and "paired_vs_baseline" not in data
+    assert not (out / "baseline_episodes.csv").exists() and len(read_csv(out / "episodes.csv")) == 2
