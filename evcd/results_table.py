@@ -219,18 +219,25 @@ def _gap_table(jobs: Sequence[JobResult], rng: np.random.Generator, resamples: i
     ]
 
 
+def _agent_evs_groups(jobs: Sequence[JobResult]) -> list[tuple[str, int, list[JobResult]]]:
+    """``(agent, evs, the jobs of that cell)`` in table order (agents by :func:`_agents`, EVs ascending)."""
+    return [
+        (agent, evs, [j for j in jobs if j.agent == agent and j.evs == evs])
+        for agent in _agents(jobs)
+        for evs in sorted({j.evs for j in jobs if j.agent == agent})
+    ]
+
+
 def _detail_table(jobs: Sequence[JobResult]) -> list[str]:
     rows = []
-    for agent in _agents(jobs):
-        for evs in sorted({j.evs for j in jobs if j.agent == agent}):
-            group = [j for j in jobs if j.agent == agent and j.evs == evs]
-            learns = any(j.train_episodes > 0 for j in group)
-            rows.append([
-                agent, str(evs), str(len(group)),
-                f"{sum(j.truncated for j in group)} / {sum(j.eval_episodes for j in group)}",
-                _num(seed_interval(j.mean_queue_wait for j in group).mean),
-                _num(seed_interval(j.train_wall_s for j in group).mean, 0) if learns else "—",
-            ])  # fmt: skip
+    for agent, evs, group in _agent_evs_groups(jobs):
+        learns = any(j.train_episodes > 0 for j in group)
+        rows.append([
+            agent, str(evs), str(len(group)),
+            f"{sum(j.truncated for j in group)} / {sum(j.eval_episodes for j in group)}",
+            _num(seed_interval(j.mean_queue_wait for j in group).mean),
+            _num(seed_interval(j.train_wall_s for j in group).mean, 0) if learns else "—",
+        ])  # fmt: skip
     header = ["agent", "EVs", "seeds", "truncated / episodes", "mean queue wait (s)"]
     header.append("training wall time (s)")
     return [
@@ -245,15 +252,13 @@ def _detail_table(jobs: Sequence[JobResult]) -> list[str]:
 
 def _paper_table(jobs: Sequence[JobResult]) -> list[str]:
     rows = []
-    for agent in _agents(jobs):
-        for evs in sorted({j.evs for j in jobs if j.agent == agent}):
-            group = [j for j in jobs if j.agent == agent and j.evs == evs]
-            rows.append([
-                agent, str(evs),
-                format_stat(seed_interval(j.train_mean_travel_time for j in group)),
-                format_stat(seed_interval(j.mean_travel_time for j in group)),
-                _num(PAPER_TRAVEL_TIME.get(agent, {}).get(evs, math.nan), 0),
-            ])  # fmt: skip
+    for agent, evs, group in _agent_evs_groups(jobs):
+        rows.append([
+            agent, str(evs),
+            format_stat(seed_interval(j.train_mean_travel_time for j in group)),
+            format_stat(seed_interval(j.mean_travel_time for j in group)),
+            _num(PAPER_TRAVEL_TIME.get(agent, {}).get(evs, math.nan), 0),
+        ])  # fmt: skip
     return [
         "### The paper's way: mean over the training episodes",
         "",
