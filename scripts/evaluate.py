@@ -22,41 +22,43 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.agents import agent_class, make_agent_for_env
 from evcd.agents.dqn import checkpoint_agent_config
-from evcd.checkpoint import CheckpointError
-from evcd.config_utils import agent_params, check_integer, env_kwargs, stop_on_bad_setting
+from evcd.cli.errors import stop_on_bad_setting
+from evcd.cli.params import agent_params, env_kwargs
+from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
-from evcd.env.batched import check_engine, make_runner
-from evcd.evaluate import agent_rng, evaluate, write_episodes_csv, write_results_json
-from evcd.scenario_report import format_table
+from evcd.env.runners import check_engine, make_runner
+from evcd.loops.evaluate import evaluate
+from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
+from evcd.loops.run_files import EVAL_CSV, RESULTS_JSON, write_episodes_csv, write_results_json
+from evcd.loops.seeds import agent_rng
+from evcd.report.scenario import format_table
+from evcd.utils.checkpoint import CheckpointError
+from evcd.utils.validation import check_int
 
 log = logging.getLogger("evaluate")
-
-EPISODES_CSV = "episodes.csv"
-RESULTS_JSON = "results.json"
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     """Evaluate the agent described by ``cfg``; write its files into ``out_dir``; return the summary."""
     # every check before SUMO starts
-    episodes = check_integer(cfg.episodes, "episodes", 1)
-    seed = check_integer(cfg.seed, "seed", 0)
-    resamples = check_integer(cfg.bootstrap_resamples, "bootstrap_resamples", 1)
+    episodes = check_int("episodes", cfg.episodes, minimum=1)
+    seed = check_int("seed", cfg.seed, minimum=0)
+    resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
     name, params = agent_params(cfg)  # unknown agent -> ValueError listing the known ones
-    if agent_class(name).learns:
+    if dispatcher_learns(name):
         if params.get("checkpoint") is None:
             raise ValueError(f"agent {name!r} learns: give the trained policy with agent.checkpoint=PATH "
                              "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
         params["checkpoint"] = to_absolute_path(str(params["checkpoint"]))
         params = {**checkpoint_agent_config(params["checkpoint"]), **params}
     engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
-    files = [out_dir / EPISODES_CSV, out_dir / RESULTS_JSON]
+    files = [out_dir / EVAL_CSV, out_dir / RESULTS_JSON]
     for path in files:
         if path.exists():
             raise FileExistsError(f"{path} exists: evaluate into a fresh run directory")
     env = ChargingNavEnv(**env_kwargs(cfg))  # validates every env value; loads the scenario, no SUMO
-    agent = make_agent_for_env(name, env, agent_rng(seed), **params)
+    agent = make_dispatcher(name, env, agent_rng(seed), **params)
     log.info("%s on %s, evs=%s, %d episodes, seed %d", agent, env.scenario.root, cfg.evs, episodes, seed)
 
     runner = make_runner(env, engine, batch)
@@ -85,10 +87,13 @@ def _brief(row: Any) -> dict[str, Any]:
     return {k: getattr(row, k) for k in keys}
 
 
+register_configs()
+
+
 @hydra.main(version_base="1.3", config_path="../conf", config_name="evaluate")
 def main(cfg: DictConfig) -> float:
     """Hydra entry point; returns the mean travel time (for sweepers). A bad setting exits with code 2,
-    or in a multirun fails only its own job (:func:`~evcd.config_utils.stop_on_bad_setting`)."""
+    or in a multirun fails only its own job (:func:`~evcd.cli.errors.stop_on_bad_setting`)."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     try:
         return run(cfg, out_dir)["mean_travel_time"]

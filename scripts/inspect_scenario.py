@@ -23,14 +23,14 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.atomic import atomic_write_text
-from evcd.config_utils import demand_config
-from evcd.plots import plot_scenario_day
+from evcd.cli.params import demand_config
+from evcd.report.figures import plot_scenario_day
+from evcd.report.scenario import day_summary, format_table, station_distance_matrix, station_table
 from evcd.scenario.demand import DAY, generate_demand, write_demand
 from evcd.scenario.netstats import format_summary, network_summary
 from evcd.scenario.scenario import load_scenario
-from evcd.scenario_report import day_summary, format_table, station_distance_matrix, station_table
 from evcd.sim.day import simulate_day
+from evcd.utils.atomic import atomic_write_text
 
 log = logging.getLogger("inspect_scenario")
 

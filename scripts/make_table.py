@@ -7,7 +7,7 @@
         --out results/ --allow-incomplete
 
 Writes ``results.csv`` (one row per job), ``results.md`` (the tables, also printed), ``results_bars.png``
-and ``learning_curves.png`` into ``--out`` (default: the first directory); see :mod:`evcd.results_table`.
+and ``learning_curves.png`` into ``--out`` (default: the first directory); see :mod:`evcd.report.table`.
 Exit codes: 0 done; 1 a job of a sweep is missing or failed (each is named; ``--allow-incomplete``
 builds the table from the others); 2 anything else (not a run directory, an output file exists, ...).
 """
@@ -19,8 +19,8 @@ import logging
 import sys
 from pathlib import Path
 
-from evcd.results_table import make_table
-from evcd.sweep_results import IncompleteSweepError, ResultsError
+from evcd.report.sweep import IncompleteSweepError, ResultsError
+from evcd.report.table import make_table
 
 log = logging.getLogger("make_table")
 

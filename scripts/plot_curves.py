@@ -17,9 +17,8 @@ import logging
 import sys
 from pathlib import Path
 
-from evcd.evaluate import read_episodes_csv
-from evcd.plots import plot_learning_curve
-from evcd.train import RESULTS_JSON, TRAIN_CSV
+from evcd.loops.curves import plot_learning_curve
+from evcd.loops.run_files import RESULTS_JSON, TRAIN_CSV, read_episodes_csv
 
 log = logging.getLogger("plot_curves")
 

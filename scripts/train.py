@@ -10,7 +10,7 @@
     python scripts/train.py resume=true hydra.run.dir=outputs/train/<run>       # continue a run
     tensorboard --logdir outputs/
 
-Everything is in ``conf/train.yaml`` (and ``conf/experiment/``); see :mod:`evcd.train` for what a
+Everything is in ``conf/train.yaml`` (and ``conf/experiment/``); see :mod:`evcd.loops.train` for what a
 run does and writes; ``scripts/make_table.py`` turns a sweep into the results table. Bad settings
 stop the run with exit code 2 and a message naming the value, before SUMO starts (in a multirun
 only that job fails; the others run, then the sweep exits with code 1).
@@ -23,50 +23,45 @@ from pathlib import Path
 from typing import Any
 
 import hydra
-import numpy as np
 import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.agents import agent_class, make_agent_for_env
-from evcd.checkpoint import CheckpointError
-from evcd.config_utils import agent_params, check_integer, env_kwargs, stop_on_bad_setting
+from evcd.cli.errors import stop_on_bad_setting
+from evcd.cli.params import agent_params, config_days, env_kwargs
+from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
-from evcd.env.batched import check_engine, make_runner
-from evcd.evaluate import AGENT_STREAM, agent_rng
-from evcd.train import TrainSettings, train_and_evaluate
+from evcd.env.runners import check_engine, make_runner
+from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
+from evcd.loops.seeds import agent_rng, baseline_rng
+from evcd.loops.train import TrainSettings, train_and_evaluate
+from evcd.utils.checkpoint import CheckpointError
+from evcd.utils.validation import check_int
 
 log = logging.getLogger("train")
-
-
-def _days(cfg: DictConfig, key: str) -> tuple[int, ...]:
-    days = OmegaConf.to_container(OmegaConf.select(cfg, key), resolve=True)
-    if not isinstance(days, list) or not days:
-        raise ValueError(f"{key}={days!r}: must be a non-empty list of demand seeds, e.g. [0]")
-    return tuple(days)
 
 
 def build(cfg: DictConfig) -> dict[str, Any]:
     """Everything the run needs, checked before any simulation starts."""
     settings = TrainSettings(
-        episodes=check_integer(cfg.train.episodes, "train.episodes", 0),
-        eval_episodes=check_integer(cfg.eval.episodes, "eval.episodes", 1),
-        seed=check_integer(cfg.seed, "seed", 0),
-        checkpoint_every=check_integer(cfg.train.checkpoint_every, "train.checkpoint_every", 0),
+        episodes=check_int("train.episodes", cfg.train.episodes, minimum=0),
+        eval_episodes=check_int("eval.episodes", cfg.eval.episodes, minimum=1),
+        seed=check_int("seed", cfg.seed, minimum=0),
+        checkpoint_every=check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
         progress=bool(cfg.progress),
-        log_window=check_integer(cfg.train.log_window, "train.log_window", 1),
-        resamples=check_integer(cfg.eval.bootstrap_resamples, "eval.bootstrap_resamples", 1),
+        log_window=check_int("train.log_window", cfg.train.log_window, minimum=1),
+        resamples=check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
     )
-    check_integer(cfg.torch_threads, "torch_threads", 1)
+    check_int("torch_threads", cfg.torch_threads, minimum=1)
     engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
     name, params = agent_params(cfg)
-    if agent_class(name).learns and settings.episodes < 1:
+    if dispatcher_learns(name) and settings.episodes < 1:
         raise ValueError(f"train.episodes={settings.episodes}: agent {name!r} learns, so it needs >= 1")
     if params.get("checkpoint") is not None:
         raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
                          "resume=true with its hydra.run.dir")  # fmt: skip
     params.pop("checkpoint", None)
-    train_days, eval_days = _days(cfg, "train.days"), _days(cfg, "eval.days")
+    train_days, eval_days = config_days(cfg, "train.days"), config_days(cfg, "eval.days")
     if tuple(cfg.env.demand_seeds) != train_days:
         raise ValueError(f"env.demand_seeds={list(cfg.env.demand_seeds)}: train.py sets it from "
                          f"train.days (and eval.days); set those instead")  # fmt: skip
@@ -77,11 +72,10 @@ def build(cfg: DictConfig) -> dict[str, Any]:
     if set(train_days) & set(eval_days):
         log.warning("train.days and eval.days share %s: the evaluation is not on unseen traffic",
                     sorted(set(train_days) & set(eval_days)))  # fmt: skip
-    agent = make_agent_for_env(name, envs["train"], agent_rng(settings.seed), **params)
+    agent = make_dispatcher(name, envs["train"], agent_rng(settings.seed), **params)
     baseline = None
     if cfg.eval.baseline is not None:
-        base_rng = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(AGENT_STREAM, 1)))
-        baseline = make_agent_for_env(str(cfg.eval.baseline), envs["eval"], base_rng)
+        baseline = make_dispatcher(str(cfg.eval.baseline), envs["eval"], baseline_rng(settings.seed))
         if baseline.learns:
             raise ValueError(f"eval.baseline={cfg.eval.baseline!r}: must be a rule (random, greedy, "
                              "queue_aware)")  # fmt: skip
@@ -140,10 +134,13 @@ def report_lines(result: Any, evs: int) -> list[str]:
     return lines
 
 
+register_configs()
+
+
 @hydra.main(version_base="1.3", config_path="../conf", config_name="train")
 def main(cfg: DictConfig) -> float:
     """Hydra entry point; a bad setting exits with code 2, or in a multirun fails only its own job
-    (:func:`~evcd.config_utils.stop_on_bad_setting`)."""
+    (:func:`~evcd.cli.errors.stop_on_bad_setting`)."""
     try:
         return train(cfg)
     except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:

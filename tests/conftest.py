@@ -1,17 +1,51 @@
-"""Shared fixtures: a small real SUMO scenario generated once per test session."""
+"""Shared fixtures and helpers: small real SUMO scenarios generated in the session, environments on
+them, and the scripts run as a user runs them (a subprocess) or composed as Hydra composes them.
+
+- ``small_scenario``: a 4 x 4 grid with two stations (hand-built days, :mod:`tests.env.handmade`);
+- :func:`make_grid_scenario` / ``grid_env_dir``: an 8 x 8 grid with three stations; ``make_env`` makes
+  environments on it with a light, short background day (:data:`GRID_ENV`);
+- :func:`run_script`, :func:`compose_config` and ``script_overrides`` (a tiny run of a script on the
+  8 x 8 grid): what the script tests share.
+"""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
+import sumolib
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
 
+from evcd.cli.schema import register_configs
+from evcd.env import ChargingNavEnv
+from evcd.scenario.placement import place_stations
+from evcd.scenario.scenario import STATIONS_FILE, VTYPES_FILE
 from evcd.scenario.stations_file import Station, write_stations
 from evcd.scenario.vtypes import write_vtypes
-from evcd.sumo_tools import run_tool
+from evcd.utils.sumo_tools import run_tool
+
+ROOT = Path(__file__).resolve().parents[1]
+CONF = ROOT / "conf"
+SCRIPTS = ROOT / "scripts"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _isolated_snapshot_cache(tmp_path_factory: pytest.TempPathFactory):
+    """Day snapshots built by tests (and the scripts they start) go to a temporary cache, never ~/.cache."""
+    patch = pytest.MonkeyPatch()
+    patch.setenv("EVCD_CACHE", str(tmp_path_factory.mktemp("evcd_cache")))
+    yield
+    patch.undo()
+
+
+# ---------------------------------------------------------------------------------------- scenarios
 @dataclass(frozen=True)
 class SmallScenario:
     """A 4 x 4 left-hand grid (200 m blocks, one lane per direction) with two stations.
@@ -49,10 +83,171 @@ def small_scenario(tmp_path_factory: pytest.TempPathFactory) -> SmallScenario:
     return SmallScenario(root, net_file, stations_file, vtypes_file, stations)
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _isolated_snapshot_cache(tmp_path_factory: pytest.TempPathFactory):
-    """Day snapshots built by tests (and the scripts they start) go to a temporary cache, never ~/.cache."""
-    patch = pytest.MonkeyPatch()
-    patch.setenv("EVCD_CACHE", str(tmp_path_factory.mktemp("evcd_cache")))
-    yield
-    patch.undo()
+def make_grid(path: Path, number: int = 8, length: float = 250.0) -> Path:
+    """A left-hand grid network with 2-lane streets."""
+    run_tool(
+        "netgenerate",
+        [
+            "--grid", "--grid.number", number, "--grid.length", length,
+            "--default.lanenumber", 2, "--default.speed", 13.89,
+            "--lefthand", "--no-turnarounds", "false", "-o", path,
+        ],
+    )  # fmt: skip
+    return path
+
+
+def make_grid_scenario(folder: Path, k: int = 3, spacing: float = 700.0) -> Path:
+    """A complete scenario folder on an 8 x 8 grid: network, stations, vehicle types."""
+    folder.mkdir(parents=True, exist_ok=True)
+    net_file = make_grid(folder / "grid.net.xml")
+    net = sumolib.net.readNet(str(net_file))
+    write_stations(place_stations(net, k, spacing, np.random.default_rng(0)), folder / STATIONS_FILE)
+    write_vtypes(folder / VTYPES_FILE)
+    return folder
+
+
+# ---------------------------------------------------------------------------------------- environments
+#: A light background day on the 8 x 8 grid with every departure in the first two hours, so that its
+#: snapshots build in a couple of seconds and the paper protocol, stopped at PAPER_DAY_END, takes a
+#: few seconds per episode.
+GRID_DEMAND: dict[str, Any] = {
+    "cars_per_day": 800,
+    "evs": 40,
+    "min_trip_m": 500.0,
+    "charging_share": 0.5,
+    "hourly_profile": [8.0, 8.0] + [0.0] * 22,
+}
+WINDOW = (1800.0, 3600.0)
+PAPER_DAY_END = 5400.0
+GRID_ENV: dict[str, Any] = {
+    "demand": GRID_DEMAND,
+    "departure_window": WINDOW,
+    "snapshot_every": 300.0,
+    "day_end": PAPER_DAY_END,
+}
+
+
+@pytest.fixture(scope="session")
+def grid_env_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A scenario folder on the 8 x 8 grid (do not modify: shared by the session)."""
+    return make_grid_scenario(tmp_path_factory.mktemp("grid_env"))
+
+
+@pytest.fixture(scope="session")
+def env_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A snapshot cache shared by the session's environments (days are built once)."""
+    return tmp_path_factory.mktemp("env_cache")
+
+
+class EnvFactory:
+    """Makes environments one at a time (libsumo: one simulation per process); closes them all."""
+
+    def __init__(self) -> None:
+        self.made = 0
+        self._envs: list[ChargingNavEnv] = []
+
+    def make(self, **kwargs: Any) -> ChargingNavEnv:
+        self.close()
+        env = ChargingNavEnv(**kwargs)
+        self._envs.append(env)
+        self.made += 1
+        return env
+
+    def close(self) -> None:
+        for env in self._envs:
+            env.close()
+
+
+@pytest.fixture
+def make_env(grid_env_dir: Path, env_cache: Path) -> Iterator[Callable[..., ChargingNavEnv]]:
+    """``make_env(**overrides)``: a grid environment, closed after the test (one libsumo at a time)."""
+    factory = EnvFactory()
+    yield lambda **overrides: factory.make(
+        **{"scenario": grid_env_dir, "cache_dir": env_cache, **GRID_ENV, **overrides}
+    )
+    factory.close()
+
+
+@pytest.fixture
+def make_small_env(
+    small_scenario: SmallScenario, env_cache: Path, tmp_path: Path
+) -> Iterator[Callable[..., ChargingNavEnv]]:
+    """``make_small_env(vehicles, **overrides)``: an environment whose background day is the
+    hand-built ``vehicles`` (see ``tests/env/handmade.py``) on the small 4 x 4 grid."""
+    from tests.env.handmade import write_routes
+
+    factory = EnvFactory()
+
+    def make(vehicles: list[str], **overrides: Any) -> ChargingNavEnv:
+        routes = write_routes(tmp_path / f"day{factory.made}.rou.xml", vehicles)
+        kwargs = {
+            "scenario": small_scenario.root,
+            "route_file": routes,
+            "departure_window": (0.0, 600.0),
+            "snapshot_every": 100.0,
+            "cache_dir": env_cache,
+            **overrides,
+        }
+        return factory.make(**kwargs)
+
+    yield make
+    factory.close()
+
+
+def run_episode(
+    env: ChargingNavEnv,
+    seed: int,
+    policy: Callable[[Any], int] | None = None,
+    options: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Play one episode (greedy by ``D`` unless ``policy``); return its observations, actions, info."""
+    m = int(env.action_space.n)
+    obs, info = env.reset(seed=seed, options=options)
+    observations, actions, rewards = [obs], [], []
+    while True:
+        action = policy(obs) if policy is not None else int(obs[:m].argmin())
+        obs, reward, terminated, truncated, info = env.step(action)
+        observations.append(obs)
+        actions.append(action)
+        rewards.append(reward)
+        if terminated or truncated:
+            return {
+                "observations": observations,
+                "actions": actions,
+                "rewards": rewards,
+                "terminated": terminated,
+                "info": info,
+            }
+
+
+# ---------------------------------------------------------------------------------------- scripts
+def run_script(
+    script: str, *args: str, timeout: float = 900, cwd: Path = ROOT, code: str | None = None
+) -> subprocess.CompletedProcess[str]:
+    """``python scripts/<script> args...`` as a user runs it (or ``python -c code args...``)."""
+    cmd = [sys.executable, "-c", code] if code is not None else [sys.executable, str(SCRIPTS / script)]
+    return subprocess.run([*cmd, *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+def compose_config(config_name: str, *overrides: str, return_hydra_config: bool = False) -> DictConfig:
+    """The config a script composes (``train``, ``evaluate``, ``inspect``) with ``overrides``."""
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose(config_name, overrides=list(overrides), return_hydra_config=return_hydra_config)
+
+
+@pytest.fixture(scope="session")
+def script_grid(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The 8 x 8 grid scenario the script tests run on (read-only: shared by the session)."""
+    return make_grid_scenario(tmp_path_factory.mktemp("script_grid") / "grid")
+
+
+@pytest.fixture(scope="session")
+def script_overrides(script_grid: Path, tmp_path_factory: pytest.TempPathFactory) -> list[str]:
+    """Overrides for a tiny, quick run of a script on the grid (its own snapshot cache, built once)."""
+    cache = tmp_path_factory.mktemp("script_cache")
+    return [
+        f"scenario.path={script_grid}", "evs=30", "scenario.demand.cars_per_day=300",
+        "scenario.demand.min_trip_m=500", "env.departure_window=[21600,23400]", f"env.cache_dir={cache}",
+        "progress=false",
+    ]  # fmt: skip

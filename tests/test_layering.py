@@ -1,12 +1,18 @@
-"""Data flows one way: scenario -> sim -> env -> agents -> train/evaluate (shared/DESIGN.md section 5).
+"""The house: each folder of ``evcd/`` is one layer and imports run one way, from the top down
+(shared/DESIGN.md section 5):
 
-Each layer imports only what lies below it: checked on the source (every ``import`` statement of
-every module) and on a fresh interpreter (what importing a module actually loads).
+    utils < scenario < sim < env < agents < loops < report, bench < cli (< scripts)
+
+A module imports ``evcd`` modules of its own layer or of layers below it, never above it nor a
+sibling (``report`` and ``bench`` do not import each other). Checked on the source (every ``import``
+statement of every module, including those inside functions) and on a fresh interpreter (what
+importing a module actually loads); the check is shown to fail on a planted reverse import.
 """
 
 from __future__ import annotations
 
 import ast
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -15,22 +21,19 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "evcd"
 
-#: layer -> modules (prefixes) it must not import
-FORBIDDEN = {
-    "scenario": (
-        "evcd.sim",
-        "evcd.env",
-        "evcd.agents",
-        "evcd.train",
-        "evcd.evaluate",
-        "libsumo",
-        "traci",
-        "torch",
-    ),
-    "sim": ("evcd.env", "evcd.agents", "evcd.train", "evcd.evaluate", "torch"),
-    "env": ("evcd.agents", "evcd.train", "evcd.evaluate", "torch"),
-    "agents": ("evcd.sim", "evcd.scenario", "evcd.train", "evcd.evaluate", "libsumo", "traci"),
+#: Each folder's rank: a module may import evcd modules of a lower rank or of its own folder.
+RANKS = {
+    "utils": 0, "scenario": 1, "sim": 2, "env": 3, "agents": 4, "loops": 5, "report": 6, "bench": 6, "cli": 7,
+}  # fmt: skip
+#: Third-party modules a layer must not import.
+FORBIDDEN_LIBRARIES = {
+    "scenario": ("libsumo", "traci", "torch"),
+    "sim": ("torch",),
+    "env": ("torch",),
+    "agents": ("libsumo", "traci"),
 }
+#: Modules over this many lines are split (one concept each).
+MAX_LINES = 450
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -45,16 +48,63 @@ def imported_modules(path: Path) -> set[str]:
     return names
 
 
-@pytest.mark.parametrize("layer", sorted(FORBIDDEN))
-def test_no_module_imports_a_layer_above_it(layer):
-    files = sorted((PACKAGE / layer).glob("*.py"))
-    assert files
+def layer_of(name: str) -> str | None:
+    """The layer (top folder of evcd) a dotted module name belongs to, if it is one of evcd's."""
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == "evcd" and parts[1] in RANKS else None
+
+
+def violations(package: Path) -> list[str]:
+    """Every import of ``package`` that runs against the layering."""
     bad = []
-    for path in files:
+    for path in sorted(package.rglob("*.py")):
+        rel = path.relative_to(package)
+        if len(rel.parts) == 1:  # evcd/__init__.py: registers the environment by name only
+            continue
+        layer = rel.parts[0]
         for name in imported_modules(path):
-            if any(name == f or name.startswith(f + ".") for f in FORBIDDEN[layer]):
-                bad.append(f"{path.name} imports {name}")
-    assert not bad, bad
+            other = layer_of(name)
+            if other is not None and other != layer and RANKS[other] >= RANKS[layer]:
+                bad.append(f"{rel} ({layer}) imports {name} ({other})")
+            if any(name == lib or name.startswith(lib + ".") for lib in FORBIDDEN_LIBRARIES.get(layer, ())):
+                bad.append(f"{rel} ({layer}) imports {name}")
+    return bad
+
+
+def test_every_folder_is_a_layer_and_the_root_holds_only_the_package_init():
+    folders = {p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__"}
+    assert folders == set(RANKS)
+    assert [p.name for p in PACKAGE.glob("*.py")] == ["__init__.py"]
+    for folder in folders:
+        assert (PACKAGE / folder / "__init__.py").is_file(), folder
+
+
+def test_imports_run_one_way():
+    assert violations(PACKAGE) == []
+
+
+@pytest.mark.parametrize(
+    ("planted", "code"),
+    [
+        ("utils/planted.py", "from evcd.loops.train import train_and_evaluate\n"),
+        ("env/planted.py", "def f():\n    import evcd.agents.dqn\n"),
+        ("report/planted.py", "from evcd.bench import engines\n"),
+        ("scenario/planted.py", "import libsumo\n"),
+    ],
+)
+def test_a_planted_reverse_import_is_caught(tmp_path, planted, code):
+    copy = tmp_path / "evcd"
+    shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    assert violations(copy) == []
+    (copy / planted).write_text(code)
+    found = violations(copy)
+    assert found and all(v.startswith(planted) for v in found), found
+
+
+def test_no_module_is_over_the_size_a_reader_holds():
+    long = {str(p.relative_to(PACKAGE)): n for p in PACKAGE.rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > MAX_LINES}  # fmt: skip
+    assert long == {}
 
 
 def loaded_after(statement: str) -> set[str]:
@@ -73,13 +123,18 @@ def test_the_simulation_layer_does_not_pull_in_the_environment():
     assert "evcd.sim.snapshots" in mods and "evcd.env" not in mods and "evcd.agents" not in mods
 
 
-def test_the_environment_does_not_pull_in_agents_or_torch():
-    mods = loaded_after("import evcd.env")
-    assert "evcd.env.charging_nav" in mods
-    assert not {m for m in mods if m.startswith(("evcd.agents", "evcd.train", "evcd.evaluate"))}
+def test_the_environment_and_its_runners_do_not_pull_in_agents_or_torch():
+    mods = loaded_after("import evcd.env.runners")
+    assert "evcd.env.charging_nav" in mods and "evcd.env.runners.batched" in mods
+    assert not {m for m in mods if m.startswith(("evcd.agents", "evcd.loops"))}
     assert "torch" not in mods
 
 
 def test_the_heuristics_do_not_pay_for_torch():
     mods = loaded_after("import evcd.agents\nfrom evcd.agents import make_agent")
     assert "torch" not in mods
+
+
+def test_reading_a_sweep_does_not_pay_for_torch():
+    mods = loaded_after("import evcd.report.sweep")
+    assert "evcd.report.sweep" in mods and "torch" not in mods

@@ -4,6 +4,11 @@
     agent = make_agent("greedy", n_stations=5, rng=rng)      # or make_agent_for_env("greedy", env, rng)
     agent = make_agent("dueling_ddqn", 5, rng, lr=1e-3)      # DQNAgent(double=True, dueling=True)
 
+Agents are dispatchers only: they decide, and learners learn from transitions; they never play
+episodes themselves (the runners of :mod:`evcd.env.runners` do, and the loops of :mod:`evcd.loops`
+drive them; the best station in hindsight, a bound rather than a policy, is
+:mod:`evcd.loops.hindsight`).
+
 The registry maps a name to a class path (imported on first use, so that the heuristics do not pay
 for torch) and to the defaults that name implies: ``dqn`` and ``dueling_ddqn`` are the one
 :class:`~evcd.agents.dqn.DQNAgent` with its two switches off or on.
@@ -12,19 +17,17 @@ for torch) and to the defaults that name implies: ``dqn`` and ``dueling_ddqn`` a
 from __future__ import annotations
 
 import importlib
-import inspect
 from typing import Any
 
 import numpy as np
 
-from evcd.agents.base import Agent, Transition, split_observation
+from evcd.agents.base import Agent, EpisodeState, Transition, observation_units, split_observation
 
 #: Agent name -> (``module:Class``, the constructor arguments that name implies).
 _REGISTRY: dict[str, tuple[str, dict[str, Any]]] = {
     "random": ("evcd.agents.heuristics:RandomAgent", {}),
     "greedy": ("evcd.agents.heuristics:GreedyAgent", {}),
     "queue_aware": ("evcd.agents.heuristics:QueueAwareAgent", {}),
-    "hindsight": ("evcd.agents.heuristics:HindsightAgent", {}),
     "dqn": ("evcd.agents.dqn:DQNAgent", {"double": False, "dueling": False}),
     "dueling_ddqn": ("evcd.agents.dqn:DQNAgent", {"double": True, "dueling": True}),
 }
@@ -50,7 +53,7 @@ def agent_defaults(name: str) -> dict[str, Any]:
 
 
 def _check_kwargs(cls: type[Agent], name: str, kwargs: dict[str, Any]) -> None:
-    params = list(inspect.signature(cls.__init__).parameters)[3:]  # after self, n_stations, rng
+    params = cls.option_names()
     unknown = sorted(set(kwargs) - set(params))
     if unknown:
         raise ValueError(f"agent {name!r}: unknown options {unknown}; it takes {params or 'none'}")
@@ -78,10 +81,12 @@ def make_agent_for_env(name: str, env: Any, rng: np.random.Generator, **kwargs: 
 __all__ = [
     "AGENT_NAMES",
     "Agent",
+    "EpisodeState",
     "Transition",
     "agent_class",
     "agent_defaults",
     "make_agent",
     "make_agent_for_env",
+    "observation_units",
     "split_observation",
 ]

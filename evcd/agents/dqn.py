@@ -1,36 +1,33 @@
 """DQN and Dueling Double DQN: one agent class, two switches.
 
-    agent = DQNAgent(n_stations=5, rng=rng, double=True, dueling=True)      # Dueling DDQN
+    agent = DQNAgent(n_stations=5, rng=rng, config=DQNConfig(lr=1e-3), double=True, dueling=True)
     action = agent.act(obs, explore=True)                                   # epsilon-greedy
     agent.observe(Transition(obs, action, reward, next_obs, terminated, truncated))   # learns
 
+- The hyperparameters are one :class:`~evcd.agents.dqn_config.DQNConfig` (the agent takes it whole).
 - ``dueling`` picks the network (:mod:`evcd.agents.networks`); ``double`` the target: DQN bootstraps
   from ``max_a Q_target(s', a)``, Double DQN from ``Q_target(s', argmax_a Q_online(s', a))``.
 - Replay is prioritized (:mod:`evcd.agents.replay`): priorities ``(|TD error| + eps) ** alpha``,
   importance weights with ``beta`` annealed linearly to 1; ``alpha = 0`` is uniform replay.
 - ``terminated`` (the target started charging) cuts the bootstrap; ``truncated`` does not.
 - Exploration is epsilon-greedy, epsilon linear from ``epsilon_start`` to ``epsilon_end`` over
-  ``exploration_steps`` transitions. ``exploration="slot"`` (the textbook form) draws at every
-  decision slot, so an exploring target zig-zags between stations; ``"episode"`` draws once per
-  episode, at its first decision: with probability epsilon the whole episode drives to one random
-  station (the Random baseline's behaviour), otherwise it follows the network. Exploration draws
-  come from the generator handed to :meth:`begin_episode` (the episode's own, so an episode does not
-  depend on those run before it); replay sampling from the agent's own generator, drawn from ``rng``
-  at construction.
-- The network sees ``obs * obs_scale``: the environment's raw ``[D, N, Z]`` (metres, vehicles) is
-  scaled to km, tens of vehicles and multiples of the charging points (:meth:`env_kwargs` reads the
-  scale off the environment), or left alone if the environment already normalises.
+  ``exploration_steps`` transitions, per slot or per episode (:class:`DQNEpisode`); its draws come
+  from the episode's generator (so an episode does not depend on those run before it), replay
+  sampling from the agent's own generator, drawn from ``rng`` at construction.
+- The network's input is the observation in physical units (m, vehicles) times :attr:`input_scale`:
+  km, tens of vehicles and multiples of the charging points for an agent made for an environment
+  (``points``), whether that environment normalises its observations or not (``normalized``); a
+  checkpoint keeps the scale, so a loaded policy always sees what it was trained on.
 
 No global random state is touched: the networks are initialised inside ``torch.random.fork_rng``
-from a seed drawn from ``rng``. :meth:`state_dict` holds everything a resumed run needs.
+from a seed drawn from ``rng``. :meth:`DQNAgent.state_dict` holds everything a resumed run needs.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
-import math
-import numbers
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -41,103 +38,31 @@ import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812  (torch's convention)
 
-from evcd.agents.base import Agent, Transition
-from evcd.agents.networks import check_hidden, make_q_network
+from evcd.agents.base import Agent, EpisodeState, Transition, observation_units
+from evcd.agents.dqn_config import DQNConfig, linear_schedule
+from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
-from evcd.checkpoint import CheckpointError, load_checkpoint, to_numpy
-from evcd.env.observation import D_SCALE_M, N_SCALE
+from evcd.env.observation import unit_divisors
+from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
+from evcd.utils.validation import check_bool
 
 log = logging.getLogger(__name__)
 
-LOSSES = ("mse", "huber")
-EXPLORATIONS = ("slot", "episode")
-_UNDRAWN = -1  # episode exploration: not decided yet (None: follow the network; >= 0: that station)
-STATE_FORMAT = "evcd.agents.dqn/1"
+STATE_FORMAT = "evcd.agents.dqn/2"
 
 
-@dataclass(frozen=True)
-class DQNConfig:
-    """The agent's hyperparameters (see :class:`DQNAgent` for their meaning); validated on creation."""
+@dataclass
+class DQNEpisode(EpisodeState):
+    """An episode of a DQN agent. Under ``exploration="episode"`` it holds the episode's one
+    exploration draw, made at its first decision while exploring.
 
-    double: bool = False
-    dueling: bool = False
-    hidden: tuple[int, ...] = (512, 256)
-    lr: float = 1e-3
-    batch_size: int = 32
-    buffer_size: int = 10_000
-    gamma: float = 0.99
-    learning_starts: int = 100
-    train_freq: int = 1
-    gradient_steps: int = 1
-    target_update: int = 8000
-    tau: float = 1.0
-    epsilon_start: float = 1.0
-    epsilon_end: float = 0.1
-    exploration_steps: int = 1000
-    exploration: str = "slot"
-    alpha: float = 0.6
-    beta_start: float = 0.4
-    beta_steps: int = 1000
-    priority_eps: float = 1e-6
-    loss: str = "mse"
-    max_grad_norm: float | None = 10.0
-    reward_scale: float = 1.0
+    Attributes:
+        drawn: whether the draw was made.
+        random_station: the station the whole episode then drives to; ``None``: it follows the network.
+    """
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "hidden", check_hidden(self.hidden))
-        for key in ("double", "dueling"):
-            if not isinstance(getattr(self, key), bool | np.bool_):
-                raise ValueError(f"{key}={getattr(self, key)!r}: must be true or false")
-        for key in ("batch_size", "buffer_size", "train_freq", "gradient_steps", "target_update"):
-            _integer(key, getattr(self, key), 1)
-        for key in ("learning_starts", "exploration_steps", "beta_steps"):
-            _integer(key, getattr(self, key), 0)
-        if self.buffer_size < self.batch_size:
-            raise ValueError(f"buffer_size={self.buffer_size} < batch_size={self.batch_size}: the buffer "
-                             "must hold at least one batch")  # fmt: skip
-        _real("lr", self.lr, low=0.0, low_open=True)
-        _real("reward_scale", self.reward_scale, low=0.0, low_open=True)
-        _real("priority_eps", self.priority_eps, low=0.0, low_open=True)
-        for key in ("gamma", "epsilon_start", "epsilon_end", "alpha", "beta_start"):
-            _real(key, getattr(self, key), low=0.0, high=1.0)
-        _real("tau", self.tau, low=0.0, high=1.0, low_open=True)
-        if self.exploration not in EXPLORATIONS:
-            raise ValueError(f"exploration={self.exploration!r}: must be one of {EXPLORATIONS}")
-        if self.loss not in LOSSES:
-            raise ValueError(f"loss={self.loss!r}: must be one of {LOSSES}")
-        if self.max_grad_norm is not None:
-            _real("max_grad_norm", self.max_grad_norm, low=0.0, low_open=True)
-
-
-def _integer(key: str, value: Any, minimum: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
-        raise ValueError(f"{key}={value!r}: must be an integer >= {minimum}")
-
-
-def _real(key: str, value: Any, low: float, high: float = math.inf, low_open: bool = False) -> None:
-    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-    ok = ok and (value > low if low_open else value >= low) and value <= high
-    if not ok:
-        bounds = f"{'(' if low_open else '['}{low:g}, {high:g}]" if math.isfinite(high) else (
-            f"> {low:g}" if low_open else f">= {low:g}")  # fmt: skip
-        raise ValueError(f"{key}={value!r}: must be a finite number in {bounds}")
-
-
-def linear_schedule(start: float, end: float, steps: int, t: int) -> float:
-    """``start`` moving linearly to ``end`` over ``steps`` steps, then ``end`` (``steps = 0``: ``end``)."""
-    if steps <= 0 or t >= steps:
-        return float(end)
-    return float(start + (end - start) * t / steps)
-
-
-def observation_scale(stations: Sequence[Any], normalized: bool) -> np.ndarray:
-    """The factor that brings the environment's ``[D, N, Z]`` to km, tens of vehicles and multiples
-    of the charging points (ones if the environment normalises already)."""
-    m = len(stations)
-    if normalized:
-        return np.ones(3 * m, dtype=np.float32)
-    points = np.array([st.points for st in stations], dtype=np.float64)
-    return np.concatenate([np.full(m, 1 / D_SCALE_M), np.full(m, 1 / N_SCALE), 1 / points]).astype(np.float32)
+    drawn: bool = False
+    random_station: int | None = None
 
 
 class DQNAgent(Agent):
@@ -146,31 +71,16 @@ class DQNAgent(Agent):
     Args:
         n_stations: number of stations (actions).
         rng: seeds the networks' initialisation and the agent's replay-sampling generator.
+        config: the hyperparameters (default: :class:`DQNConfig`'s); ``hyperparameters`` given as
+            keywords replace fields of it (``DQNAgent(5, rng, lr=1e-3)``).
         double: bootstrap with the Double DQN target.
         dueling: use the dueling network.
-        hidden: hidden layer sizes of the MLP trunk.
-        lr: Adam learning rate.
-        batch_size: transitions per gradient step.
-        buffer_size: replay capacity (transitions).
-        gamma: discount per decision slot.
-        learning_starts: transitions stored before the first gradient step.
-        train_freq: a round of learning every this many transitions.
-        gradient_steps: gradient steps per round.
-        target_update: gradient steps between target-network updates.
-        tau: target update ``target <- tau * online + (1 - tau) * target``; 1 is a hard copy.
-        epsilon_start, epsilon_end, exploration_steps: the epsilon-greedy schedule (transitions).
-        exploration: ``"slot"`` (a draw per decision) or ``"episode"`` (a draw per episode; see the
-            module docstring).
-        alpha: priority exponent (0: uniform replay).
-        beta_start, beta_steps: importance-sampling exponent, annealed linearly to 1 (transitions).
-        priority_eps: added to ``|TD error|`` so that no priority is zero.
-        loss: ``"mse"`` (the paper's) or ``"huber"``; both weighted by the importance weights.
-        max_grad_norm: clip the gradient's global norm to this (``None``: no clipping).
-        reward_scale: rewards are multiplied by this before learning (the paper's reward reaches
-            tens; a scale keeps the regression targets near 1).
-        obs_scale: per-feature factor applied to observations (default: none); see
-            :func:`observation_scale`, which :meth:`env_kwargs` uses.
-        checkpoint: load this checkpoint (a training checkpoint or run directory) after building.
+        points: each station's charging points (one number for all): the network then sees ``D`` in
+            km, ``N`` in tens of vehicles and ``Z`` in multiples of the points. ``None``: it sees the
+            observation as given (for environments whose observations are already scaled).
+        normalized: whether the environment normalises its observations (``normalize_obs``); the
+            network's input is the same either way (needs ``points``).
+        checkpoint: load this checkpoint's policy (a training checkpoint or run directory) after building.
     """
 
     learns = True
@@ -179,61 +89,45 @@ class DQNAgent(Agent):
         self,
         n_stations: int,
         rng: np.random.Generator,
+        config: DQNConfig | None = None,
+        *,
         double: bool = False,
         dueling: bool = False,
-        hidden: Sequence[int] = (512, 256),
-        lr: float = 1e-3,
-        batch_size: int = 32,
-        buffer_size: int = 10_000,
-        gamma: float = 0.99,
-        learning_starts: int = 100,
-        train_freq: int = 1,
-        gradient_steps: int = 1,
-        target_update: int = 8000,
-        tau: float = 1.0,
-        epsilon_start: float = 1.0,
-        epsilon_end: float = 0.1,
-        exploration_steps: int = 1000,
-        exploration: str = "slot",
-        alpha: float = 0.6,
-        beta_start: float = 0.4,
-        beta_steps: int = 1000,
-        priority_eps: float = 1e-6,
-        loss: str = "mse",
-        max_grad_norm: float | None = 10.0,
-        reward_scale: float = 1.0,
-        obs_scale: Sequence[float] | np.ndarray | None = None,
+        points: int | Sequence[int] | None = None,
+        normalized: bool = False,
         checkpoint: str | Path | None = None,
+        **hyperparameters: Any,
     ) -> None:
         super().__init__(n_stations, rng)
-        self.config = DQNConfig(
-            double=double, dueling=dueling, hidden=tuple(hidden) if isinstance(hidden, Sequence) else hidden,
-            lr=lr, batch_size=batch_size, buffer_size=buffer_size, gamma=gamma,
-            learning_starts=learning_starts, train_freq=train_freq, gradient_steps=gradient_steps,
-            target_update=target_update, tau=tau, epsilon_start=epsilon_start, epsilon_end=epsilon_end,
-            exploration_steps=exploration_steps, exploration=exploration, alpha=alpha,
-            beta_start=beta_start, beta_steps=beta_steps,
-            priority_eps=priority_eps, loss=loss, max_grad_norm=max_grad_norm, reward_scale=reward_scale,
-        )  # fmt: skip
-        obs_dim = 3 * self.n_stations
-        scale = np.ones(obs_dim, np.float32) if obs_scale is None else np.asarray(obs_scale, np.float32)
-        if scale.shape != (obs_dim,) or not (np.isfinite(scale).all() and (scale > 0).all()):
-            raise ValueError(f"obs_scale: need {obs_dim} finite factors > 0 (3 x stations), got {scale!r}")
-        self.obs_dim = obs_dim
-        self.obs_scale = scale
+        unknown = sorted(set(hyperparameters) - set(DQNConfig.field_names()))
+        if unknown:
+            raise ValueError(f"DQNAgent: unknown hyperparameters {unknown}; DQNConfig has "
+                             f"{list(DQNConfig.field_names())}")  # fmt: skip
+        if config is not None and not isinstance(config, DQNConfig):
+            raise ValueError(f"config={config!r}: must be a DQNConfig")
+        config = config or DQNConfig()
+        self.config = dataclasses.replace(config, **hyperparameters) if hyperparameters else config
+        self.double = check_bool("double", double)
+        self.dueling = check_bool("dueling", dueling)
+        self.obs_dim = 3 * self.n_stations
+        self.normalized = check_bool("normalized", normalized)
+        self._divisors = self._observation_divisors(points)
+        #: physical observation (m, vehicles) -> network input; saved with the networks
+        self.input_scale = (1.0 / self._divisors).astype(np.float32) if points is not None else (
+            np.ones(self.obs_dim, np.float32))  # fmt: skip
+        self._set_input_scale(self.input_scale)
         cfg = self.config
         init_seed = int(rng.integers(2**63 - 1))
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(init_seed)
-            self.online = make_q_network(obs_dim, self.n_stations, cfg.hidden, cfg.dueling)
+            self.online = make_q_network(self.obs_dim, self.n_stations, cfg.hidden, self.dueling)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self.optimizer = torch.optim.Adam(self.online.parameters(), lr=cfg.lr)
-        self.replay = PrioritizedReplayBuffer(cfg.buffer_size, obs_dim, alpha=cfg.alpha, eps=cfg.priority_eps)
+        self.replay = PrioritizedReplayBuffer(cfg.buffer_size, self.obs_dim, cfg.alpha, cfg.priority_eps)
         self.learn_rng = np.random.default_rng(rng.integers(2**63 - 1))
         self.steps = 0  # transitions observed
         self.gradient_steps = 0
         self.target_updates = 0
-        self._episode_station: int | None = _UNDRAWN
         self.loss_total = 0.0  # sum of the losses of every gradient step (for logs)
         self.q_total = 0.0  # sum of the batches' mean Q(s, a)
         if checkpoint is not None:
@@ -243,13 +137,36 @@ class DQNAgent(Agent):
     @property
     def name(self) -> str:  # type: ignore[override]  (derived from the switches)
         """``dqn``, ``ddqn``, ``dueling_dqn`` or ``dueling_ddqn``."""
-        return ("dueling_" if self.config.dueling else "") + ("ddqn" if self.config.double else "dqn")
+        return ("dueling_" if self.dueling else "") + ("ddqn" if self.double else "dqn")
 
     @classmethod
     def env_kwargs(cls, env: Any) -> dict[str, Any]:
-        """The observation scale for ``env`` (its stations' charging points, its normalisation)."""
-        base = env.unwrapped
-        return {"obs_scale": observation_scale(base.stations, base.config.normalize_obs).tolist()}
+        """The environment's charging points per station and whether it normalises observations."""
+        return observation_units(env)
+
+    @classmethod
+    def option_names(cls) -> list[str]:
+        """The constructor's options and every hyperparameter of :class:`DQNConfig`."""
+        return [n for n in super().option_names() if n != "hyperparameters"] + list(DQNConfig.field_names())
+
+    def _observation_divisors(self, points: int | Sequence[int] | None) -> np.ndarray:
+        """What the environment's observation units are worth in physical ones (float64, ``3m``)."""
+        if points is None:
+            if self.normalized:
+                raise ValueError("normalized=True needs the stations' charging points (points=...), to "
+                                 "read Z in vehicles")  # fmt: skip
+            return np.ones(self.obs_dim)
+        pts = np.broadcast_to(np.asarray(points), (self.n_stations,)) if np.ndim(points) == 0 else (
+            np.asarray(points))  # fmt: skip
+        if pts.shape != (self.n_stations,) or not np.issubdtype(pts.dtype, np.integer) or (pts < 1).any():
+            raise ValueError(f"points={points!r}: must be an integer >= 1 or {self.n_stations} of them")
+        return unit_divisors(pts)
+
+    def _set_input_scale(self, scale: np.ndarray) -> None:
+        """Take ``scale`` (physical -> network) and derive the factor applied to observations."""
+        self.input_scale = np.asarray(scale, np.float32)
+        units = self._divisors if self.normalized else np.ones(self.obs_dim)
+        self._obs_to_input = (self.input_scale.astype(np.float64) * units).astype(np.float32)
 
     def __repr__(self) -> str:
         c = self.config
@@ -272,66 +189,36 @@ class DQNAgent(Agent):
         x = np.asarray(obs, dtype=np.float32)
         if x.shape[-1:] != (self.obs_dim,):
             raise ValueError(f"observation of shape {x.shape}: expected (..., {self.obs_dim}) = [D, N, Z]")
-        return torch.from_numpy(x * self.obs_scale)
+        return torch.from_numpy(x * self._obs_to_input)
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         """The online network's Q-values for one observation ``(m,)`` or a batch ``(k, m)``."""
         with torch.no_grad():
             return self.online(self._input(obs)).numpy()
 
-    def begin_episode(self, rng: np.random.Generator | None = None) -> None:
-        """Start an episode: exploration draws come from ``rng`` (the episode's) from now on."""
-        super().begin_episode(rng)
-        self._episode_station = _UNDRAWN
+    def new_episode(self, rng: np.random.Generator) -> DQNEpisode:
+        """An episode whose exploration draws come from ``rng``."""
+        return DQNEpisode(rng)
 
-    def act(self, obs: np.ndarray, explore: bool = False) -> int:
-        """Epsilon-greedy if ``explore`` (draws from the episode's generator), else ``argmax Q``."""
-        if explore and self.config.exploration == "episode" and self._episode_station not in (_UNDRAWN, None):
-            return int(self._episode_station)  # exploring this episode: no forward pass needed
-        return self._choose(int(self.q_values(np.asarray(obs)[None, :])[0].argmax()), explore)
+    def decide(self, obs: np.ndarray, episodes: Sequence[DQNEpisode], explore: bool = False) -> np.ndarray:
+        """``argmax Q`` of each observation (one forward pass), epsilon-greedy per episode if ``explore``."""
+        greedy = self.q_values(obs).argmax(axis=-1)
+        pairs = zip(greedy, episodes, strict=True)
+        return np.array([self._choose(int(g), episode, explore) for g, episode in pairs], dtype=np.int64)
 
-    def _choose(self, greedy: int, explore: bool) -> int:
-        """The action given the greedy one: the exploration draws of :meth:`act`."""
+    def _choose(self, greedy: int, episode: DQNEpisode, explore: bool) -> int:
+        """The action given the greedy one: the exploration draws, from the episode's generator."""
         if not explore:
             return greedy
+        rng = episode.rng
         if self.config.exploration == "episode":
-            if self._episode_station == _UNDRAWN:  # the episode's first decision: explore it or not
-                draw, station = self.rng.random(), int(self.rng.integers(self.n_stations))
-                self._episode_station = station if draw < self.epsilon else None
-            return greedy if self._episode_station is None else int(self._episode_station)
-        draw, station = self.rng.random(), int(self.rng.integers(self.n_stations))
+            if not episode.drawn:  # the episode's first decision: explore it or not
+                draw, station = rng.random(), int(rng.integers(self.n_stations))
+                episode.drawn = True
+                episode.random_station = station if draw < self.epsilon else None
+            return greedy if episode.random_station is None else episode.random_station
+        draw, station = rng.random(), int(rng.integers(self.n_stations))
         return station if draw < self.epsilon else greedy
-
-    def act_batch(self, obs: np.ndarray, explore: bool = False) -> np.ndarray:
-        """:meth:`act` for a batch of observations ``(k, 3m)`` in one forward pass (slot exploration;
-        episode exploration keeps a choice per episode, so it goes through :meth:`act`)."""
-        greedy = self.q_values(obs).argmax(axis=-1)
-        if not explore:
-            return greedy
-        if self.config.exploration == "episode":
-            raise ValueError("exploration='episode' decides per episode: call act() for each target")
-        return np.array([self._choose(int(g), True) for g in greedy], dtype=np.int64)
-
-    def episode_state(self) -> Any:
-        """The episode's generator and its exploration draw (episode exploration)."""
-        return (self.rng, self._episode_station)
-
-    def set_episode_state(self, state: Any) -> None:
-        """Restore :meth:`episode_state`."""
-        self.rng, self._episode_station = state
-
-    def act_episodes(
-        self, obs: np.ndarray, states: Sequence[Any], explore: bool = False
-    ) -> tuple[np.ndarray, list[Any]]:
-        """:meth:`act` for ``k`` targets of different episodes with one forward pass (see
-        :meth:`evcd.agents.base.Agent.act_episodes`)."""
-        greedy = self.q_values(obs).argmax(axis=-1)
-        actions, out = [], []
-        for g, state in zip(greedy, states, strict=True):
-            self.set_episode_state(state)
-            actions.append(self._choose(int(g), explore))
-            out.append(self.episode_state())
-        return np.array(actions, dtype=np.int64), out
 
     # ------------------------------------------------------------------ learning
     def observe(self, transition: Transition) -> None:
@@ -352,7 +239,7 @@ class DQNAgent(Agent):
         ``double``, else from the target network itself (the max)."""
         with torch.no_grad():
             next_target = self.target(next_obs)
-            if self.config.double:
+            if self.double:
                 best = self.online(next_obs).argmax(dim=1, keepdim=True)
                 next_value = next_target.gather(1, best).squeeze(1)
             else:
@@ -421,16 +308,16 @@ class DQNAgent(Agent):
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict[str, Any]:
-        """Everything that determines the agent's future: networks, optimizer, replay, counters,
-        generators (numpy and torch), and the hyperparameters (checked on load). A snapshot: later
+        """Everything that determines the agent's future: networks, optimizer, replay, counters, its
+        generators, the input scale and the hyperparameters (checked on load). A snapshot: later
         training does not change it (torch's own ``state_dict`` returns the live tensors)."""
-        config = asdict(self.config)
+        config = {**asdict(self.config), "double": self.double, "dueling": self.dueling}
         config["hidden"] = list(config["hidden"])
         return {
             "format": STATE_FORMAT,
             "n_stations": self.n_stations,
             "config": config,
-            "obs_scale": torch.from_numpy(self.obs_scale.copy()),
+            "input_scale": torch.from_numpy(self.input_scale.copy()),
             "online": copy.deepcopy(self.online.state_dict()),
             "target": copy.deepcopy(self.target.state_dict()),
             "optimizer": copy.deepcopy(self.optimizer.state_dict()),
@@ -444,11 +331,13 @@ class DQNAgent(Agent):
             },
             "rng": self.rng.bit_generator.state,
             "learn_rng": self.learn_rng.bit_generator.state,
-            "torch_rng": torch.get_rng_state(),
         }
 
     def load_state_dict(self, state: dict[str, Any], policy_only: bool = False) -> None:
-        """Restore :meth:`state_dict` (``policy_only``: just the online and target networks).
+        """Restore :meth:`state_dict` (``policy_only``: just the networks and their input scale).
+
+        The checkpoint's input scale replaces this agent's: the network keeps seeing what it was
+        trained on, whatever this environment's observation units.
 
         Raises:
             CheckpointError: the state is not a DQN agent's, or was made for another observation
@@ -456,23 +345,26 @@ class DQNAgent(Agent):
         """
         found = state.get("format") if isinstance(state, dict) else type(state).__name__
         if found != STATE_FORMAT:
-            raise CheckpointError(f"not a DQN agent state (format {found!r}, expected {STATE_FORMAT!r})")
+            earlier = isinstance(found, str) and found.startswith("evcd.agents.dqn/")
+            why = " (an earlier evcd's: retrain with this version)" if earlier else ""
+            raise CheckpointError(f"not a DQN agent state of this evcd (format {found!r}, expected "
+                                  f"{STATE_FORMAT!r}){why}")  # fmt: skip
         saved = state["config"]
-        scale = np.asarray(to_numpy(state["obs_scale"]), np.float32)
-        if scale.shape != self.obs_scale.shape:
+        scale = np.asarray(to_numpy(state["input_scale"]), np.float32)
+        if scale.shape != self.input_scale.shape:
             raise CheckpointError(
                 f"the checkpoint was made for observations of size {scale.shape[0]}; this "
                 f"environment's are {self.obs_dim} (3 x {self.n_stations} stations)"
             )
-        mine = asdict(self.config)
-        for key in ("hidden", "dueling", "double"):
-            if list(np.atleast_1d(saved[key])) != list(np.atleast_1d(mine[key])):
+        mine = {"hidden": list(self.config.hidden), "dueling": self.dueling, "double": self.double}
+        for key, value in mine.items():
+            if list(np.atleast_1d(saved[key])) != list(np.atleast_1d(value)):
                 raise CheckpointError(f"the checkpoint's agent has {key}={saved[key]!r}; this one has "
-                                      f"{key}={mine[key]!r} (use the same agent settings)")  # fmt: skip
-        if not np.allclose(scale, self.obs_scale):
-            log.warning("the checkpoint's observation scale differs from this environment's; using the "
-                        "checkpoint's (the network was trained on it)")  # fmt: skip
-            self.obs_scale = scale
+                                      f"{key}={value!r} (use the same agent settings)")  # fmt: skip
+        if not np.array_equal(scale, self.input_scale):
+            log.info("the checkpoint's network reads observations at its own scale (trained with other "
+                     "charging points or without scaling); using it")  # fmt: skip
+        self._set_input_scale(scale)
         try:
             self.online.load_state_dict(state["online"])
             self.target.load_state_dict(state["target"])
@@ -492,7 +384,6 @@ class DQNAgent(Agent):
         self.q_total = float(counters["q_total"])
         self.rng.bit_generator.state = state["rng"]
         self.learn_rng.bit_generator.state = state["learn_rng"]
-        torch.set_rng_state(state["torch_rng"])
 
     def load(self, path: str | Path) -> None:
         """Load the policy (networks) from a checkpoint written by the trainer (or a run directory)."""

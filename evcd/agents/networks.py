@@ -10,11 +10,12 @@ linear layer to the Q-values; the dueling one ends in a value head ``V(s)`` and 
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Sequence
 
 import torch
 from torch import nn
+
+from evcd.utils.validation import check_int, is_integer
 
 
 def check_hidden(hidden: Sequence[int]) -> tuple[int, ...]:
@@ -29,9 +30,8 @@ def check_hidden(hidden: Sequence[int]) -> tuple[int, ...]:
         raise ValueError(f"hidden={hidden!r}: must be a list of layer sizes, e.g. [512, 256]") from None
     if not sizes:
         raise ValueError("hidden=[]: need at least one hidden layer size, e.g. [512, 256]")
-    for size in sizes:
-        if isinstance(size, bool) or not isinstance(size, numbers.Integral) or size < 1:
-            raise ValueError(f"hidden={list(sizes)!r}: every layer size must be an integer >= 1")
+    if not all(is_integer(size) and size >= 1 for size in sizes):
+        raise ValueError(f"hidden={list(sizes)!r}: every layer size must be an integer >= 1")
     return tuple(int(s) for s in sizes)
 
 
@@ -85,8 +85,7 @@ def make_q_network(obs_dim: int, n_actions: int, hidden: Sequence[int], dueling:
     Raises:
         ValueError: a non-positive dimension or bad hidden sizes.
     """
-    for key, value in (("obs_dim", obs_dim), ("n_actions", n_actions)):
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-            raise ValueError(f"{key}={value!r}: must be an integer >= 1")
+    obs_dim = check_int("obs_dim", obs_dim, minimum=1)
+    n_actions = check_int("n_actions", n_actions, minimum=1)
     cls = DuelingQNetwork if dueling else QNetwork
-    return cls(int(obs_dim), int(n_actions), hidden)
+    return cls(obs_dim, n_actions, hidden)

@@ -23,10 +23,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-
-def _require(ok: bool, message: str) -> None:
-    if not ok:
-        raise ValueError(message)
+from evcd.utils.validation import check_int, check_real, require
 
 
 class SumTree:
@@ -40,7 +37,7 @@ class SumTree:
     """
 
     def __init__(self, capacity: int) -> None:
-        _require(_is_int(capacity) and capacity >= 1, f"capacity {capacity!r}: must be an integer >= 1")
+        check_int("capacity", capacity, minimum=1)
         self.capacity = int(capacity)
         self._leaf0 = 1 << (self.capacity - 1).bit_length()  # P
         self._depth = self._leaf0.bit_length() - 1  # log2(P) levels below the root
@@ -83,7 +80,7 @@ class SumTree:
     def set_all(self, values: np.ndarray) -> None:
         """Replace every leaf at once and rebuild the tree bottom-up (O(capacity), for restoring)."""
         vals = np.asarray(values, dtype=np.float64)
-        _require(vals.shape == (self.capacity,), f"values of shape {vals.shape}: expected ({self.capacity},)")
+        require(vals.shape == (self.capacity,), f"values of shape {vals.shape}: expected ({self.capacity},)")
         self._check_values(vals)
         tree, p = self._tree, self._leaf0
         tree[p : p + self.capacity] = vals
@@ -104,7 +101,7 @@ class SumTree:
         """
         t = np.asarray(targets, dtype=np.float64).reshape(-1)
         total = self.total()
-        _require(total > 0.0, "cannot search a sum tree whose total is 0")
+        require(total > 0.0, "cannot search a sum tree whose total is 0")
         if t.size and not (t.min() >= 0.0 and t.max() <= total * (1.0 + 1e-9)):
             bad = t[~((t >= 0.0) & (t <= total * (1.0 + 1e-9)))][0]
             raise ValueError(f"target {bad!r} outside [0, total = {total!r})")
@@ -157,7 +154,7 @@ class SumTree:
     @staticmethod
     def _check_indices(indices: np.ndarray, limit: int) -> np.ndarray:
         idx = np.asarray(indices)
-        _require(idx.dtype.kind in "iu", f"indices of dtype {idx.dtype}: must be integers")
+        require(idx.dtype.kind in "iu", f"indices of dtype {idx.dtype}: must be integers")
         idx = idx.astype(np.int64, copy=False).reshape(-1)
         if idx.size and not idx.view(np.uint64).max() < limit:  # a negative index wraps to a huge one
             bad = idx[(idx < 0) | (idx >= limit)][0]
@@ -194,8 +191,8 @@ def importance_weights(probabilities: np.ndarray, size: int, beta: float) -> np.
         ValueError: a probability not in ``(0, 1]``, ``size < 1`` or ``beta`` outside ``[0, 1]``.
     """
     p = np.asarray(probabilities, dtype=np.float64)
-    _require(_is_int(size) and size >= 1, f"size {size!r}: must be an integer >= 1")
-    _check_unit("beta", beta)
+    check_int("size", size, minimum=1)
+    check_real("beta", beta, low=0.0, high=1.0)
     if p.size and not (p.min() > 0.0 and p.max() <= 1.0):
         bad = p[~((p > 0.0) & (p <= 1.0))][0]
         raise ValueError(f"probability {float(bad)!r} outside (0, 1]")
@@ -219,10 +216,10 @@ class PrioritizedReplayBuffer:
     """
 
     def __init__(self, capacity: int, obs_dim: int, alpha: float = 0.6, eps: float = 1e-6) -> None:
-        _require(_is_int(capacity) and capacity >= 1, f"capacity {capacity!r}: must be an integer >= 1")
-        _require(_is_int(obs_dim) and obs_dim >= 1, f"obs_dim {obs_dim!r}: must be an integer >= 1")
-        _check_unit("alpha", alpha)
-        _require(_is_real(eps) and 0.0 < eps < math.inf, f"eps {eps!r}: must be finite and > 0")
+        check_int("capacity", capacity, minimum=1)
+        check_int("obs_dim", obs_dim, minimum=1)
+        check_real("alpha", alpha, low=0.0, high=1.0)
+        check_real("eps", eps, low=0.0, low_open=True)
         self.capacity, self.obs_dim = int(capacity), int(obs_dim)
         self.alpha, self.eps = float(alpha), float(eps)
         self._obs = np.zeros((capacity, obs_dim), dtype=np.float32)
@@ -250,8 +247,8 @@ class PrioritizedReplayBuffer:
         """
         o, o2 = self._check_obs("obs", obs), self._check_obs("next_obs", next_obs)
         a, r = operator.index(action), float(reward)
-        _require(a >= 0, f"action {a}: must be >= 0")
-        _require(math.isfinite(r), f"reward {r!r}: must be finite")
+        require(a >= 0, f"action {a}: must be >= 0")
+        require(math.isfinite(r), f"reward {r!r}: must be finite")
         slot = self._position
         self._obs[slot], self._next_obs[slot] = o, o2
         self._actions[slot], self._rewards[slot] = a, r
@@ -268,12 +265,12 @@ class PrioritizedReplayBuffer:
         Raises:
             ValueError: an empty buffer, ``batch_size < 1`` or ``beta`` outside ``[0, 1]``.
         """
-        _require(_is_int(batch_size) and batch_size >= 1, f"batch_size {batch_size!r}: must be an int >= 1")
-        _check_unit("beta", beta)
-        _require(self._size > 0, "cannot sample from an empty replay buffer")
+        check_int("batch_size", batch_size, minimum=1)
+        check_real("beta", beta, low=0.0, high=1.0)
+        require(self._size > 0, "cannot sample from an empty replay buffer")
         tree = self._tree
         total = tree.total()
-        _require(total > 0.0, "cannot sample: every stored priority is 0")
+        require(total > 0.0, "cannot sample: every stored priority is 0")
         targets = (np.arange(batch_size) + rng.random(batch_size)) * (total / batch_size)
         idx = tree._find(targets)
         probs = tree._tree[idx + tree._leaf0] / total
@@ -291,7 +288,7 @@ class PrioritizedReplayBuffer:
         """
         idx = SumTree._check_indices(indices, self._size)
         td = np.asarray(td_errors, dtype=np.float64).reshape(-1)
-        _require(td.shape == idx.shape, f"{td.size} TD errors for {idx.size} indices")
+        require(td.shape == idx.shape, f"{td.size} TD errors for {idx.size} indices")
         if not td.size:
             return
         priorities = (np.abs(td) + self.eps) ** self.alpha
@@ -332,10 +329,10 @@ class PrioritizedReplayBuffer:
                 inconsistent position / size / priority (the message names it).
         """
         missing = sorted(set(_STATE_KEYS) - set(state))
-        _require(not missing, f"replay state lacks {missing}")
+        require(not missing, f"replay state lacks {missing}")
         for key in ("capacity", "obs_dim"):
             mine, theirs = getattr(self, key), int(state[key])
-            _require(theirs == mine, f"replay state has {key} {theirs}, this buffer {mine}")
+            require(theirs == mine, f"replay state has {key} {theirs}, this buffer {mine}")
         cap, dim = self.capacity, self.obs_dim
         arrays = {}
         for key, dtype, shape in (
@@ -344,17 +341,17 @@ class PrioritizedReplayBuffer:
             ("truncated", bool, (cap,)), ("priorities", np.float64, (cap,)),
         ):  # fmt: skip
             arr = np.asarray(state[key]).astype(dtype)
-            _require(arr.shape == shape, f"replay state {key!r} has shape {arr.shape}, expected {shape}")
+            require(arr.shape == shape, f"replay state {key!r} has shape {arr.shape}, expected {shape}")
             arrays[key] = arr
         size, position = int(state["size"]), int(state["position"])
         alpha, eps, max_priority = float(state["alpha"]), float(state["eps"]), float(state["max_priority"])
-        _require(0 <= size <= cap, f"replay state size {size} outside [0, {cap}]")
-        _require(position == size or (size == cap and 0 <= position < cap),
+        require(0 <= size <= cap, f"replay state size {size} outside [0, {cap}]")
+        require(position == size or (size == cap and 0 <= position < cap),
                  f"replay state position {position} inconsistent with size {size}")  # fmt: skip
-        _check_unit("alpha", alpha)
-        _require(0.0 < eps < math.inf, f"replay state eps {eps!r}: must be finite and > 0")
-        _require(0.0 < max_priority < math.inf, f"replay state max_priority {max_priority!r}: must be > 0")
-        _require(not arrays["priorities"][size:].any(), "replay state has priorities on slots never filled")
+        check_real("alpha", alpha, low=0.0, high=1.0)
+        require(0.0 < eps < math.inf, f"replay state eps {eps!r}: must be finite and > 0")
+        require(0.0 < max_priority < math.inf, f"replay state max_priority {max_priority!r}: must be > 0")
+        require(not arrays["priorities"][size:].any(), "replay state has priorities on slots never filled")
         self._tree.set_all(arrays["priorities"])  # validates the priorities before anything else changes
         for key in ("obs", "next_obs", "actions", "rewards", "terminated", "truncated"):
             getattr(self, f"_{key}")[...] = arrays[key]
@@ -363,17 +360,5 @@ class PrioritizedReplayBuffer:
 
     def _check_obs(self, name: str, obs: Any) -> np.ndarray:
         arr = np.asarray(obs, dtype=np.float32)
-        _require(arr.shape == (self.obs_dim,), f"{name} of shape {arr.shape}: expected ({self.obs_dim},)")
+        require(arr.shape == (self.obs_dim,), f"{name} of shape {arr.shape}: expected ({self.obs_dim},)")
         return arr
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int | np.integer) and not isinstance(value, bool)
-
-
-def _is_real(value: Any) -> bool:
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-
-
-def _check_unit(name: str, value: Any) -> None:
-    _require(_is_real(value) and 0.0 <= value <= 1.0, f"{name} {value!r}: must be in [0, 1]")

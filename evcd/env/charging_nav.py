@@ -26,6 +26,15 @@ import gymnasium
 import numpy as np
 
 from evcd.env.config import PAPER_DAY_END, EnvConfig
+from evcd.env.episode_rules import (
+    MAX_INSERT_TRIES,
+    TIME_EPS,
+    Motion,
+    another_origin,
+    final_info,
+    slot_deadline,
+    slot_end_reason,
+)
 from evcd.env.observation import Observation, RouteObserver, observation_bounds
 from evcd.env.reward import Slot, reward_fn
 from evcd.env.simulation import EpisodeSimulation
@@ -40,8 +49,6 @@ from evcd.sim.driver import SUMO_ERRORS
 log = logging.getLogger(__name__)
 
 _OPTIONS = {"departure", "origin", "depart_pos", "day"}
-_MOVED_M = 1.0  # the target counts as moving once its odometer advanced this much
-_MAX_INSERT_TRIES = 5
 
 
 @dataclass
@@ -51,8 +58,7 @@ class _Episode:
     obs: Observation
     road: str
     pos: float
-    odo_mark: float  # odometer when the target last moved ...
-    t_mark: float  # ... and when
+    motion: Motion
     done: bool = False
 
 
@@ -178,7 +184,7 @@ class ChargingNavEnv(gymnasium.Env):
     ) -> tuple[int, TargetPlan]:
         """The background day (an index into ``demand_seeds``) and the target's plan of an episode,
         drawn from ``rng`` exactly as :meth:`reset` draws them from the generator of its seed, with
-        :meth:`reset`'s ``options`` applied (the batched engine, :mod:`evcd.env.batched`, calls
+        :meth:`reset`'s ``options`` applied (the batched engine, :mod:`evcd.env.runners.batched`, calls
         this too).
 
         Raises:
@@ -215,7 +221,7 @@ class ChargingNavEnv(gymnasium.Env):
                 self.simulation.close()
         obs = self._observe(road, pos)
         now = self.simulation.time
-        self._episode = _Episode(target, day, obs, road, pos, odo, now)
+        self._episode = _Episode(target, day, obs, road, pos, Motion(odo, now))
         info = {
             "time": now,
             "departure": target.plan.departure,
@@ -271,7 +277,7 @@ class ChargingNavEnv(gymnasium.Env):
     def _insert(self, plan: TargetPlan, rng: np.random.Generator) -> Target:
         """Add the target and step until SUMO inserts it; redraw the origin if it cannot be."""
         sim = self.simulation
-        for _ in range(_MAX_INSERT_TRIES):
+        for _ in range(MAX_INSERT_TRIES):
             self._episodes += 1
             target = Target(plan, route_id=f"evcd_target_route{self._episodes}")
             target.add(sim.api, sim.controller)
@@ -288,9 +294,8 @@ class ChargingNavEnv(gymnasium.Env):
                 self.config.max_insert_delay,
             )
             sim.api.vehicle.remove(TARGET_ID)
-            origin, pos = self.origins.draw(rng)
-            plan = replace(plan, departure=sim.time, origin=origin, depart_pos=pos)
-        raise RuntimeError(f"the target could not be inserted after {_MAX_INSERT_TRIES} origins")
+            plan = another_origin(plan, self.origins, rng, sim.time)
+        raise RuntimeError(f"the target could not be inserted after {MAX_INSERT_TRIES} origins")
 
     def _advance(self, ep: _Episode) -> str | None:
         """Simulate one slot; return why the episode ends, or ``None``."""
@@ -299,9 +304,9 @@ class ChargingNavEnv(gymnasium.Env):
         driver, api, ctrl = sim.driver, sim.api, sim.controller
         departure = ep.target.plan.departure
         now = driver.time
-        end = min(now + cfg.decision_interval, departure + cfg.max_travel_time)
+        end = slot_deadline(now, departure, cfg.decision_interval, cfg.max_travel_time)
         teleports = api.simulation.getStartingTeleportNumber
-        while now < end - 1e-9:
+        while now < end - TIME_EPS:
             now = driver.step()
             if ctrl.status(TARGET_ID) == "charging":
                 break
@@ -314,13 +319,8 @@ class ChargingNavEnv(gymnasium.Env):
         status = ctrl.status(TARGET_ID)
         if status == "charging":
             return "charging"
-        if status is not None or odo - ep.odo_mark >= _MOVED_M:
-            ep.odo_mark, ep.t_mark = odo, now
-        elif now - ep.t_mark >= cfg.stuck_limit:
-            return "stuck"
-        if now - departure >= cfg.max_travel_time - 1e-9:
-            return "max_travel_time"
-        return None
+        ep.motion.update(now, odo, parked=status is not None)
+        return slot_end_reason(ep.motion, now, departure, cfg.stuck_limit, cfg.max_travel_time)
 
     def _observe(self, road: str, pos: float) -> Observation:
         ctrl = self.simulation.controller
@@ -331,29 +331,13 @@ class ChargingNavEnv(gymnasium.Env):
     def _final_info(
         self, ep: _Episode, reason: str, now: float, travel: float | None, error: str
     ) -> dict[str, Any]:
-        departure = ep.target.plan.departure
-        visits = (
-            [r for r in self.simulation.controller.records if r.vehicle == TARGET_ID]
-            if (reason != "sumo_error")
-            else []
-        )
-        waits = [_visit_end(r, now) - r.arrival_time for r in visits]
-        info: dict[str, Any] = {
-            "reason": reason,
-            "charged": travel is not None,
-            "travel_time": travel if travel is not None else now - departure,
-            "queue_wait": float(sum(waits)),
-            "arrival": visits[-1].arrival_time if visits else None,
-            "departure": departure,
-            "origin": ep.target.plan.origin,
-            "day": self._day_seed(ep.day),
-            "switches": ep.target.switches,
-        }
-        if ep.target.station is not None:
-            info["station_id"] = self.stations[ep.target.station].id
-        if error:
-            info["error"] = error
-        return info
+        records = self.simulation.controller.records if reason != "sumo_error" else []
+        visits = [(r.arrival_time, _visit_end(r, now)) for r in records if r.vehicle == TARGET_ID]
+        return final_info(
+            reason=reason, now=now, plan=ep.target.plan, travel=travel, visits=visits,
+            day=self._day_seed(ep.day), switches=ep.target.switches, station=ep.target.station,
+            stations=self.stations, error=error,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ checks
     @cached_property

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
-import numbers
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,6 +11,7 @@ from typing import Any
 from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.scenario import JURONG_WEST, Scenario, load_scenario
 from evcd.sim.snapshots import DaySpec
+from evcd.utils.validation import check_choice, check_int, check_real, is_integer
 
 PROTOCOLS = ("fast", "paper")
 #: Paper protocol: every episode's simulation runs until 23:59.
@@ -52,26 +51,18 @@ class EnvConfig:
     def __post_init__(self) -> None:
         from evcd.env.reward import REWARDS
 
-        def positive(name: str) -> None:
-            value = getattr(self, name)
-            if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}={value!r}: must be a finite number > 0")
-
-        for name in ("decision_interval", "max_travel_time", "stuck_limit", "snapshot_every", "step_length"):
-            positive(name)
-        positive("max_insert_delay")
+        for name in ("decision_interval", "max_travel_time", "stuck_limit", "snapshot_every", "step_length",
+                     "max_insert_delay"):  # fmt: skip
+            check_real(name, getattr(self, name), low=0.0, low_open=True)
         if self.decision_interval < self.step_length:
             raise ValueError(
                 f"decision_interval={self.decision_interval} must be >= step_length={self.step_length}"
             )
-        if self.protocol not in PROTOCOLS:
-            raise ValueError(f"protocol={self.protocol!r}: must be one of {PROTOCOLS}")
-        if self.evs is not None and (not isinstance(self.evs, numbers.Integral) or self.evs < 0):
-            raise ValueError(f"evs={self.evs!r}: must be an integer >= 0")
-        if self.charging_points is not None and (
-            not isinstance(self.charging_points, numbers.Integral) or self.charging_points < 1
-        ):
-            raise ValueError(f"charging_points={self.charging_points!r}: must be an integer >= 1")
+        check_choice("protocol", self.protocol, PROTOCOLS)
+        if self.evs is not None:
+            check_int("evs", self.evs, minimum=0)
+        if self.charging_points is not None:
+            check_int("charging_points", self.charging_points, minimum=1)
         try:
             lo, hi = (float(x) for x in self.departure_window)
         except (TypeError, ValueError):
@@ -84,14 +75,11 @@ class EnvConfig:
                 f"at least one step long"
             )
         object.__setattr__(self, "departure_window", (lo, hi))
-        if not (isinstance(self.day_end, numbers.Real) and self.day_end >= 0):
-            raise ValueError(f"day_end={self.day_end!r}: must be >= 0 (s of day)")
+        check_real("day_end", self.day_end, low=0.0)
         if not callable(self.reward) and self.reward not in REWARDS:
             raise ValueError(f"reward={self.reward!r}: must be one of {sorted(REWARDS)} or a callable")
         seeds = tuple(self.demand_seeds)
-        if not seeds or any(
-            not isinstance(s, numbers.Integral) or isinstance(s, bool) or s < 0 for s in seeds
-        ):
+        if not seeds or not all(is_integer(s) and s >= 0 for s in seeds):
             raise ValueError(f"demand_seeds={self.demand_seeds!r}: must be a non-empty list of integers >= 0")
         object.__setattr__(self, "demand_seeds", tuple(int(s) for s in seeds))
         if self.route_file is not None:

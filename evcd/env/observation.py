@@ -54,6 +54,16 @@ class Observation:
     vector: np.ndarray  # float32 [D, N, Z], normalised if asked
 
 
+def unit_divisors(points: Sequence[int] | np.ndarray) -> np.ndarray:
+    """What normalisation divides ``[D, N, Z]`` by (float64, length ``3m``): :data:`D_SCALE_M` (m -> km),
+    :data:`N_SCALE` (tens of vehicles) and each station's charging points (``Z`` in multiples of them).
+    The one definition of the scaled units: the environment's normalisation and the agents' reading of
+    observations both use it."""
+    pts = np.asarray(points, dtype=np.float64)
+    m = pts.size
+    return np.concatenate([np.full(m, D_SCALE_M), np.full(m, N_SCALE), pts])
+
+
 def to_vector(
     dist: np.ndarray,
     vehicles: np.ndarray,
@@ -61,13 +71,18 @@ def to_vector(
     stations: Sequence[Station],
     normalize: bool,
 ) -> np.ndarray:
-    """The float32 vector ``[D, N, Z]``, normalised or raw."""
+    """The float32 vector ``[D, N, Z]``, normalised (:func:`unit_divisors`) or raw."""
+    raw = np.concatenate([dist, vehicles, occupancy]).astype(np.float64)
     if normalize:
-        points = np.array([st.points for st in stations], dtype=np.float64)
-        parts = (dist / D_SCALE_M, vehicles / N_SCALE, occupancy / points)
-    else:
-        parts = (dist, vehicles, occupancy)
-    return np.concatenate(parts).astype(np.float32)
+        raw = raw / unit_divisors([st.points for st in stations])
+    return raw.astype(np.float32)
+
+
+def to_physical(obs: np.ndarray, points: Sequence[int] | np.ndarray, normalized: bool) -> np.ndarray:
+    """Observation vectors (one ``(3m,)`` or a batch ``(k, 3m)``) in metres and vehicles (float64),
+    whether the environment normalised them (``normalized``) or not."""
+    x = np.asarray(obs).astype(np.float64)
+    return x * unit_divisors(points) if normalized else x
 
 
 def observation_bounds(stations: Sequence[Station], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -124,7 +139,7 @@ class RouteObserver:
             others: vehicles per edge not to count in ``N`` (the batched engine's other targets).
             queued_at: a station whose ``Z`` counts the target although the controller does not
                 queue it (the batched engine's targets wait beside the queues, see
-                :mod:`evcd.env.ghost`).
+                :mod:`evcd.env.runners.ghost`).
         """
         m = len(self.stations)
         dist = np.empty(m)

@@ -126,22 +126,31 @@ class Target:
     def add(self, api: Any, controller: ChargingController) -> None:
         """Add the target to the simulation, departing at ``plan.departure`` (must not be past)."""
         p, vid = self.plan, self.vehicle_id
-        api.route.add(self.route_id, [p.origin])
-        api.vehicle.add(
-            vid,
-            self.route_id,
-            typeID=self.vtype,
-            depart=f"{p.departure:g}",
-            departLane="best",
-            departPos=f"{p.depart_pos:.2f}",
-            departSpeed="0",
-        )
+        self._add_vehicle(api, [p.origin], depart=f"{p.departure:g}", lane="best", pos=p.depart_pos)
         if not self.battery:
             return
         api.vehicle.setParameter(vid, "device.battery.capacity", f"{p.capacity_wh:.1f}")
         api.vehicle.setParameter(vid, "device.battery.chargeLevel", f"{p.capacity_wh * p.soc:.1f}")
         api.vehicle.setParameter(vid, HOLD_PARAM, "1")
         controller.hold(vid)
+
+    def _add_vehicle(self, api: Any, route: list[str], depart: str, lane: str, pos: float) -> None:
+        api.route.add(self.route_id, route)
+        api.vehicle.add(
+            self.vehicle_id,
+            self.route_id,
+            typeID=self.vtype,
+            depart=depart,
+            departLane=lane,
+            departPos=f"{pos:.2f}",
+            departSpeed="0",
+        )
+
+    def switch_to(self, index: int) -> None:
+        """Make station ``index`` the choice (a change after the first choice counts as a switch)."""
+        if self.station is not None:
+            self.switches += 1
+        self.station = index
 
     @staticmethod
     def location(api: Any, vehicle_id: str = TARGET_ID) -> tuple[str, float, float]:
@@ -168,9 +177,7 @@ class Target:
 
         Raises a SUMO error if SUMO refuses every way of stopping there.
         """
-        if self.station is not None:
-            self.switches += 1
-        self.station = index
+        self.switch_to(index)
         vid = self.vehicle_id
         if controller.status(vid) is not None:  # waiting in another car park: leave its queue
             controller.release(api, vid, time)
@@ -180,6 +187,35 @@ class Target:
             veh.setRoute(vid, route)  # drops the stop at the former station
         else:  # on a junction: let SUMO route from the next edge
             veh.changeTarget(vid, station.edge)
+        self.stop_at(api, station, observer, road, pos, time)
+
+    def reenter(
+        self,
+        api: Any,
+        index: int,
+        station: Station,
+        route: tuple[str, ...],
+        observer: RouteObserver,
+        at: tuple[str, float, int],
+        time: float,
+        ids: tuple[str, str],
+    ) -> None:
+        """Leave the car park the target waits at, out of the simulation (the batched engine's
+        targets wait beside the queue), for station ``index``: it enters the road again as a new
+        vehicle at the car park, on ``route`` (from the observation; SUMO routes it if empty).
+
+        Args:
+            at: the car park's ``(edge, lane position, lane index)``.
+            ids: the new vehicle's ``(vehicle id, route id)`` (SUMO keeps routes of removed vehicles).
+
+        Raises a SUMO error if SUMO refuses every way of stopping at ``station``.
+        """
+        road, pos, lane = at
+        self.switch_to(index)
+        self.vehicle_id, self.route_id = ids
+        self._add_vehicle(api, list(route) or [road], depart="now", lane=str(lane), pos=pos)
+        if not route:
+            api.vehicle.changeTarget(self.vehicle_id, station.edge)
         self.stop_at(api, station, observer, road, pos, time)
 
     def stop_at(

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 import sumolib
 
-from evcd.atomic import atomic_write_bytes
 from evcd.scenario.routing import RoadGraph
 from evcd.scenario.stations_file import Station
 from evcd.scenario.vtypes import CAR_TYPE, EV_TYPE
+from evcd.utils.atomic import atomic_write_bytes
 
 log = logging.getLogger(__name__)
 

@@ -1,4 +1,5 @@
-"""Convert an OSMnx GraphML road graph into SUMO plain XML (nodes, edges, types).
+"""Read an OSMnx GraphML road graph into the roads SUMO will have (the plain XML is written by
+:mod:`evcd.scenario.plain_xml`).
 
 OSMnx writes a drive network as GraphML in EPSG:4326: nodes carry ``x`` (lon), ``y`` (lat) and
 ``highway`` (``traffic_signals`` at signalised intersections); edges carry ``osmid``, ``highway``,
@@ -57,7 +58,7 @@ from dataclasses import dataclass, replace
 from itertools import pairwise
 from pathlib import Path
 
-from evcd.xml_files import read_xml_root
+from evcd.utils.xml_files import read_xml_root
 
 log = logging.getLogger(__name__)
 
@@ -234,36 +235,6 @@ def road_edges(graph: RoadGraph, *, include_service: bool = True) -> list[RoadEd
     return sorted(out, key=lambda e: e.id)
 
 
-def write_plain_xml(
-    graphml: str | Path, prefix: str | Path, *, include_service: bool = True
-) -> tuple[Path, Path, Path]:
-    """Convert ``graphml`` to SUMO plain XML ``<prefix>.nod.xml``, ``.edg.xml`` and ``.typ.xml``.
-
-    Returns the three paths. Raises like :func:`read_graphml`, and ``ValueError`` when no passenger
-    road is left.
-    """
-    graph = read_graphml(graphml)
-    edges = road_edges(graph, include_service=include_service)
-    if not edges:
-        raise ValueError(f"{graphml}: no passenger-road edges (road types {sorted(ROAD_TYPES)})")
-    used = sorted({e.from_node for e in edges} | {e.to_node for e in edges})
-    nodes = [_road_node(nid, graph.nodes[nid]) for nid in used]
-    nodes, edges = merge_signal_clusters(nodes, edges)
-    prefix = Path(prefix)
-    paths = (Path(f"{prefix}.nod.xml"), Path(f"{prefix}.edg.xml"), Path(f"{prefix}.typ.xml"))
-    _write(_nodes_xml(nodes), paths[0])
-    _write(_edges_xml(edges), paths[1])
-    types = dict(ROAD_TYPES, service=SERVICE_TYPE) if include_service else ROAD_TYPES
-    _write(_types_xml(types), paths[2])
-    log.info(
-        "plain XML: %d nodes (%d signalised), %d edges",
-        len(nodes),
-        sum(n.signals for n in nodes),
-        len(edges),
-    )
-    return paths
-
-
 def signal_clusters(
     nodes: Iterable[RoadNode], edges: Iterable[RoadEdge], max_length: float = SIGNAL_JOIN_DIST
 ) -> list[list[str]]:
@@ -334,59 +305,9 @@ def merge_signal_clusters(
     return [out_nodes[k] for k in sorted(used)], out_edges
 
 
-def _road_node(nid: str, a: dict[str, str]) -> RoadNode:
+def road_node(nid: str, a: dict[str, str]) -> RoadNode:
+    """The road node of GraphML node ``nid`` with attributes ``a``."""
     return RoadNode(nid, float(a["x"]), float(a["y"]), "traffic_signals" in _as_list(a.get("highway", "")))
-
-
-def _nodes_xml(nodes: Iterable[RoadNode]) -> ET.Element:
-    root = ET.Element("nodes")
-    for n in nodes:
-        el = ET.SubElement(root, "node", id=n.id, x=_fmt(n.lon), y=_fmt(n.lat))
-        if n.signals:
-            el.set("type", "traffic_light")
-    return root
-
-
-def _edges_xml(edges: Iterable[RoadEdge]) -> ET.Element:
-    root = ET.Element("edges")
-    for e in edges:
-        el = ET.SubElement(root, "edge", id=e.id)
-        el.set("from", e.from_node)
-        el.set("to", e.to_node)
-        el.set("type", f"highway.{e.highway}")
-        el.set("numLanes", str(e.lanes))
-        el.set("speed", f"{e.speed:.2f}")
-        if e.name:
-            el.set("name", e.name)
-        el.set("spreadType", "center" if e.oneway else "right")
-        if e.shape:
-            el.set("shape", " ".join(f"{_fmt(x)},{_fmt(y)}" for x, y in e.shape))
-        if e.osmid:
-            ET.SubElement(el, "param", key="osmid", value=e.osmid)
-    return root
-
-
-def _types_xml(types: dict[str, RoadType]) -> ET.Element:
-    root = ET.Element("types")
-    for name, t in sorted(types.items(), key=lambda kv: -kv[1].priority):
-        ET.SubElement(
-            root,
-            "type",
-            id=f"highway.{name}",
-            priority=str(t.priority),
-            numLanes=str(t.lanes),
-            speed=f"{t.speed_kmh / 3.6:.2f}",
-        )
-    return root
-
-
-def _write(root: ET.Element, path: Path) -> None:
-    ET.indent(root, space="    ")
-    ET.ElementTree(root).write(path, encoding="UTF-8", xml_declaration=True)
-
-
-def _fmt(value: float) -> str:
-    return f"{value:.7f}"
 
 
 def _local(tag: str) -> str:

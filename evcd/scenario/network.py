@@ -44,8 +44,9 @@ from pathlib import Path
 
 import sumolib
 
-from evcd.scenario.graphml import read_graphml, write_plain_xml
-from evcd.sumo_tools import SUMO_HOME, run_tool
+from evcd.scenario.graphml import read_graphml
+from evcd.scenario.plain_xml import write_plain_xml
+from evcd.utils.sumo_tools import SUMO_HOME, run_tool
 
 log = logging.getLogger(__name__)
 

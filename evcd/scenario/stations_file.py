@@ -13,8 +13,8 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from evcd.atomic import atomic_write_text
-from evcd.xml_files import read_xml_root
+from evcd.utils.atomic import atomic_write_text
+from evcd.utils.xml_files import read_xml_root
 
 DEFAULT_POWER_W = 100_000.0
 DEFAULT_POINTS = 2

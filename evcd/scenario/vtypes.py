@@ -30,7 +30,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from evcd.atomic import atomic_write_text
+from evcd.utils.atomic import atomic_write_text
 
 CAR_TYPE = "car"
 EV_TYPE = "ev"

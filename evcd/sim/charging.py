@@ -33,10 +33,10 @@ import dataclasses
 import logging
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any
 
 from evcd.scenario.stations_file import Station
+from evcd.sim.charge_record import ChargeRecord, Outcome
 from evcd.sim.driver import SUMO_ERRORS
 
 log = logging.getLogger(__name__)
@@ -58,55 +58,6 @@ _SOC_TOL = 1e-9
 _PROBE_S = 10.0  # first read after a vehicle starts charging (no rate known yet)
 _AHEAD = 0.8  # read again after this fraction of the predicted remaining time
 _POLL_EVERY_STEP_S = 5.0
-
-
-class Outcome(StrEnum):
-    """How a vehicle's visit at a station ended."""
-
-    CHARGED = "charged"  # reached its target SoC and was resumed by the controller
-    RELEASED = "released"  # released by the caller (:meth:`ChargingController.release`)
-    LEFT = "left"  # its parking stop ended by other means (duration over, rerouted)
-    VANISHED = "vanished"  # it disappeared from the car park (removed from the simulation)
-
-
-@dataclass
-class ChargeRecord:
-    """One visit of one vehicle at one station (times in simulation seconds, SoC in 0..1).
-
-    ``start_time`` is when the vehicle got a charging point (SUMO's battery starts charging one
-    step later when the station's ``chargeDelay`` is one step). ``release_time`` is when the visit
-    ended, whatever the ``outcome``; both stay ``None`` while it lasts.
-    """
-
-    vehicle: str
-    station: str
-    arrival_time: float
-    soc_arrival: float
-    target_soc: float
-    hold: bool = False
-    start_time: float | None = None
-    soc_start: float | None = None
-    release_time: float | None = None
-    soc_release: float | None = None
-    outcome: Outcome | None = None
-
-    @property
-    def queue_wait(self) -> float | None:
-        """Seconds between joining the queue and getting a point."""
-        return None if self.start_time is None else self.start_time - self.arrival_time
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain, JSON-serialisable form."""
-        d = dataclasses.asdict(self)
-        d["outcome"] = None if self.outcome is None else str(self.outcome)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> ChargeRecord:
-        """Inverse of :meth:`to_dict`."""
-        d = dict(d)
-        d["outcome"] = None if d.get("outcome") is None else Outcome(d["outcome"])
-        return cls(**d)
 
 
 @dataclass

@@ -28,7 +28,7 @@ import libsumo
 from traci.exceptions import FatalTraCIError
 from traci.exceptions import TraCIException as TraciTraCIException
 
-from evcd.sumo_tools import binary
+from evcd.utils.sumo_tools import binary
 
 log = logging.getLogger(__name__)
 

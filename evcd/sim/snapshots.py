@@ -31,7 +31,7 @@ SUMO 1.28's loadState and how evcd copes (tested in ``tests/sim/test_snapshots.p
 - the charging queues live in Python: each snapshot carries the controller's ``state_dict()``;
 - the state is not restored bit for bit (routing weights, some car-park bookkeeping), so a run
   continued from a snapshot may drift from the uninterrupted day by a step here and there:
-  :mod:`evcd.env.equivalence` measures the effect on travel times.
+  :mod:`evcd.bench.equivalence` measures the effect on travel times.
 """
 
 from __future__ import annotations
@@ -55,11 +55,11 @@ import libsumo
 from tqdm.auto import tqdm
 
 import evcd
-from evcd.atomic import atomic_write_text
 from evcd.scenario.demand import DemandConfig, generate_demand, write_demand
 from evcd.scenario.scenario import Scenario
 from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SumoDriver
+from evcd.utils.atomic import atomic_write_text
 
 log = logging.getLogger(__name__)
 

@@ -3,7 +3,7 @@ targets checked by hand (terminated vs truncated), epsilon-greedy exploration (s
 when and how it learns (learning_starts, train_freq, gradient_steps, hard and soft target updates,
 priorities, importance weights, MSE / Huber, gradient clipping, reward and observation scaling),
 validation, state round trips (in memory and through checkpoint files), determinism and the absence
-of global random state."""
+of global random state (the state dict neither holds nor sets torch's generator)."""
 
 from __future__ import annotations
 
@@ -17,18 +17,13 @@ import torch
 
 from evcd.agents import make_agent, make_agent_for_env
 from evcd.agents.base import Transition
-from evcd.agents.dqn import (
-    STATE_FORMAT,
-    DQNAgent,
-    DQNConfig,
-    checkpoint_agent_config,
-    linear_schedule,
-    observation_scale,
-)
+from evcd.agents.dqn import STATE_FORMAT, DQNAgent, DQNEpisode, checkpoint_agent_config
+from evcd.agents.dqn_config import DQNConfig, linear_schedule
 from evcd.agents.networks import DuelingQNetwork, QNetwork
-from evcd.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from evcd.env.runner import SingleEnvRunner
-from evcd.evaluate import TRAIN_STREAM, episode_specs
+from evcd.env.observation import unit_divisors
+from evcd.env.runners import SingleEnvRunner
+from evcd.loops.seeds import TRAIN_STREAM, episode_specs
+from evcd.utils.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from tests.agents.toy_env import ToyDispatchEnv
 
 M = 3  # stations
@@ -37,18 +32,22 @@ SMALL = {"hidden": (16, 16), "batch_size": 8, "buffer_size": 64}
 
 
 @pytest.fixture(autouse=True)
-def _torch_globals():
-    """One thread (tiny networks: faster); ``load_state_dict`` sets torch's global generator: put both
-    back after every test."""
-    state, threads = torch.random.get_rng_state(), torch.get_num_threads()
+def _one_thread():
+    """One thread (tiny networks: faster), put back after every test."""
+    threads = torch.get_num_threads()
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(threads)
-    torch.random.set_rng_state(state)
 
 
 def _agent(seed: int = 0, n_stations: int = M, **kwargs) -> DQNAgent:
     return DQNAgent(n_stations, np.random.default_rng(seed), **{**SMALL, **kwargs})
+
+
+def _decide(agent: DQNAgent, obs: np.ndarray, explore: bool = False, seed: int = 0) -> np.ndarray:
+    """One decision for each row of ``obs``, each row an episode of its own (generators from ``seed``)."""
+    episodes = [agent.new_episode(np.random.default_rng([seed, i])) for i in range(len(obs))]
+    return agent.decide(obs, episodes, explore)
 
 
 def _obs(rng: np.random.Generator, n: int | None = None, dim: int = OBS_DIM) -> np.ndarray:
@@ -135,8 +134,8 @@ def test_registry_names_imply_the_switches():
     ddqn = make_agent("dueling_ddqn", M, np.random.default_rng(0), hidden=[8])
     assert type(dqn) is DQNAgent
     assert type(ddqn) is DQNAgent
-    assert (dqn.config.double, dqn.config.dueling) == (False, False)
-    assert (ddqn.config.double, ddqn.config.dueling) == (True, True)
+    assert (dqn.double, dqn.dueling) == (False, False)
+    assert (ddqn.double, ddqn.dueling) == (True, True)
     assert type(dqn.online) is QNetwork
     assert type(dqn.target) is QNetwork
     assert type(ddqn.online) is DuelingQNetwork
@@ -288,7 +287,7 @@ def test_explore_false_is_argmax_even_at_epsilon_one():
         greedy = agent.q_values(obs).argmax(axis=1)
         assert len(set(greedy.tolist())) > 1  # a network whose argmax depends on the observation
         assert [agent.act(o, explore=False) for o in obs] == greedy.tolist()
-        np.testing.assert_array_equal(agent.act_batch(obs, explore=False), greedy)
+        np.testing.assert_array_equal(_decide(agent, obs, explore=False), greedy)
 
 
 def test_epsilon_one_is_uniform():
@@ -301,7 +300,7 @@ def test_epsilon_one_is_uniform():
     assert counts.sum() == n
     # each station 1/3 of the draws: 4 standard deviations is about 0.024
     np.testing.assert_allclose(counts / n, 1 / M, atol=0.03)
-    batch = agent.act_batch(np.repeat(obs[None], n, axis=0), explore=True)
+    batch = _decide(agent, np.repeat(obs[None], n, axis=0), explore=True)
     np.testing.assert_allclose(np.bincount(batch, minlength=M) / n, 1 / M, atol=0.03)
 
 
@@ -324,8 +323,7 @@ def test_epsilon_zero_is_argmax():
         greedy = agent.q_values(obs).argmax(axis=1)
         assert len(set(greedy.tolist())) > 1
         assert [agent.act(o, explore=True) for o in obs] == greedy.tolist()
-        if exploration == "slot":
-            np.testing.assert_array_equal(agent.act_batch(obs, explore=True), greedy)
+        np.testing.assert_array_equal(_decide(agent, obs, explore=True), greedy)
 
 
 @pytest.mark.parametrize("exploration", ["slot", "episode"])
@@ -383,25 +381,50 @@ def test_episode_exploration_follows_the_network_in_a_non_exploring_episode():
             assert len(set(actions)) == 1
             explored += 1
     assert explored / n == pytest.approx(0.5, abs=0.06)
-    # and act_batch refuses to explore per slot in episode mode
-    with pytest.raises(ValueError, match="episode"):
-        agent.act_batch(obs, explore=True)
 
 
-def test_act_batch_matches_act_when_not_exploring():
+def test_episode_exploration_in_a_batch_keeps_each_episodes_draw():
+    """Several episodes decided together, slot after slot: each keeps its own draw (a random station
+    for the whole episode, or the network's choice), made at its first decision and recorded in its
+    state, exactly as when each episode is played alone."""
+    agent = _agent(epsilon_start=0.5, epsilon_end=0.5, exploration="episode")
+    k, slots = 40, 6
+    obs = _obs(np.random.default_rng(30), slots * k).reshape(slots, k, OBS_DIM)
+    together = [agent.new_episode(np.random.default_rng([31, e])) for e in range(k)]
+    batched = np.stack([agent.decide(obs[s], together, explore=True) for s in range(slots)], axis=1)
+    for e, episode in enumerate(together):
+        assert episode.drawn
+        if episode.random_station is not None:
+            assert set(batched[e].tolist()) == {episode.random_station}
+        agent.begin_episode(np.random.default_rng([31, e]))
+        assert batched[e].tolist() == [agent.act(obs[s, e], explore=True) for s in range(slots)]
+    kinds = {episode.random_station is None for episode in together}
+    assert kinds == {True, False}  # both kinds of episode occur at epsilon 0.5
+
+
+def test_decide_matches_act_when_not_exploring():
     for dueling in (False, True):
         agent = _agent(dueling=dueling, seed=18)
         obs = _obs(np.random.default_rng(19), 64)
-        batch = agent.act_batch(obs, explore=False)
+        batch = _decide(agent, obs, explore=False)
         assert batch.shape == (64,)
         assert batch.dtype.kind == "i"
         assert batch.tolist() == [agent.act(o) for o in obs]
         assert all(type(agent.act(o)) is int for o in obs[:3])
 
 
+def test_a_new_episode_state_is_explicit():
+    agent = _agent(exploration="episode")
+    episode = agent.new_episode(np.random.default_rng(0))
+    assert isinstance(episode, DQNEpisode)
+    assert (episode.drawn, episode.random_station) == (False, None)
+    assert agent.begin_episode() is agent.episode and agent.episode.rng is agent.rng
+
+
 def test_observations_are_scaled_before_the_network():
     scale = np.array([1e-3] * M + [0.1] * M + [0.5, 1.0, 0.25], dtype=np.float32)
-    agent = _agent(obs_scale=scale)
+    agent = _agent(points=[2, 1, 4])
+    np.testing.assert_array_equal(agent.input_scale, scale)
     obs = np.random.default_rng(20).uniform(0, 3000, size=(10, OBS_DIM)).astype(np.float32)
     with torch.no_grad():
         expected = agent.online(torch.from_numpy(obs * scale)).numpy()
@@ -412,19 +435,22 @@ def test_observations_are_scaled_before_the_network():
     assert [agent.act(o) for o in obs] == expected.argmax(axis=1).tolist()
 
 
-def test_observation_scale_of_stations():
+def test_the_network_sees_the_same_input_on_raw_and_normalised_observations():
+    """The agent reads the environment's units off it (points, normalisation): whether the environment
+    normalises or not, the network's input is D in km, N in tens and Z in multiples of the points."""
     stations = [SimpleNamespace(points=2), SimpleNamespace(points=1), SimpleNamespace(points=4)]
-    scale = observation_scale(stations, normalized=False)
-    assert scale.dtype == np.float32
-    np.testing.assert_allclose(scale, [1e-3] * 3 + [0.1] * 3 + [0.5, 1.0, 0.25], rtol=1e-7)
-    np.testing.assert_array_equal(observation_scale(stations, normalized=True), np.ones(9, np.float32))
-    # the agent reads it off an environment
+    agents = {}
     for normalized in (False, True):
         env = SimpleNamespace(stations=stations, config=SimpleNamespace(normalize_obs=normalized),
                               action_space=SimpleNamespace(n=3))  # fmt: skip
         env.unwrapped = env
-        agent = make_agent_for_env("dqn", env, np.random.default_rng(0), hidden=[4])
-        np.testing.assert_array_equal(agent.obs_scale, observation_scale(stations, normalized))
+        agents[normalized] = make_agent_for_env("dqn", env, np.random.default_rng(0), hidden=[4])
+        np.testing.assert_allclose(agents[normalized].input_scale, 1 / unit_divisors([2, 1, 4]), rtol=1e-7)
+    raw = np.random.default_rng(21).uniform(0, 3000, size=(10, OBS_DIM)).astype(np.float32)
+    normalised = (raw / unit_divisors([2, 1, 4])).astype(np.float32)
+    np.testing.assert_allclose(agents[True].q_values(normalised), agents[False].q_values(raw), rtol=1e-5)
+    with pytest.raises(ValueError, match="points"):
+        DQNAgent(M, np.random.default_rng(0), normalized=True)
 
 
 @pytest.mark.parametrize(
@@ -437,7 +463,7 @@ def test_wrong_observation_shape_raises(obs):
     with pytest.raises(ValueError, match="shape"):
         agent.q_values(obs)
     with pytest.raises(ValueError, match="shape"):
-        agent.act_batch(np.atleast_2d(obs))
+        _decide(agent, np.atleast_2d(obs))
     with pytest.raises(ValueError, match="shape"):
         agent.observe(Transition(obs, 0, 1.0, np.zeros(OBS_DIM), False, False))
 
@@ -521,12 +547,12 @@ def _expected_q_y(agent: DQNAgent, batch) -> tuple[torch.Tensor, torch.Tensor]:
     """``Q(s, a)`` and the target ``y`` for a replay batch, by hand (before the gradient step)."""
     c = agent.config
     rows = torch.arange(len(batch.actions))
-    obs = torch.from_numpy(batch.obs * agent.obs_scale)
-    next_obs = torch.from_numpy(batch.next_obs * agent.obs_scale)
+    obs = torch.from_numpy(batch.obs * agent.input_scale)
+    next_obs = torch.from_numpy(batch.next_obs * agent.input_scale)
     with torch.no_grad():
         q = agent.online(obs)[rows, torch.from_numpy(batch.actions)]
         q_next = agent.target(next_obs)
-        best = agent.online(next_obs).argmax(dim=1) if c.double else q_next.argmax(dim=1)
+        best = agent.online(next_obs).argmax(dim=1) if agent.double else q_next.argmax(dim=1)
         boot = q_next[rows, best]
     live = 1 - torch.from_numpy(batch.terminated).float()
     return q, torch.from_numpy(batch.rewards) + c.gamma * live * boot
@@ -574,9 +600,8 @@ def test_alpha_zero_is_uniform_replay():
 def test_loss_is_the_importance_weighted_mean_by_hand(loss, double):
     """On a replay with unequal priorities, ``learn()`` returns ``mean(w_i * l(td_i))`` with the batch
     it draws; ``l`` is the square (MSE) or Huber (quadratic below 1, linear above)."""
-    scale = np.array([0.5] * M + [1.0] * M + [2.0] * M, dtype=np.float32)
     agent = _agent(double=double, loss=loss, batch_size=16, learning_starts=10**6, alpha=0.7,
-                   beta_start=0.3, beta_steps=100, obs_scale=scale)  # fmt: skip
+                   beta_start=0.3, beta_steps=100, points=[1, 2, 4])  # fmt: skip
     _perturb(agent.target, seed=24, scale=0.05)
     for t in _transitions(6, 40):
         agent.observe(t)
@@ -609,7 +634,7 @@ def test_importance_weights_scale_the_gradient():
     batch = agent.replay.sample(16, copy.deepcopy(agent.learn_rng), agent.beta)
     _, y = _expected_q_y(agent, batch)
     shadow = copy.deepcopy(agent.online)
-    obs = torch.from_numpy(batch.obs * agent.obs_scale)
+    obs = torch.from_numpy(batch.obs * agent.input_scale)
     q = shadow(obs)[torch.arange(16), torch.from_numpy(batch.actions)]
     w = torch.from_numpy(batch.weights)
     assert w.min() < 0.5
@@ -712,19 +737,17 @@ def test_learning_changes_only_the_online_network_between_target_updates():
         ({"reward_scale": 0}, "reward_scale=0"),
         ({"priority_eps": 0}, "priority_eps=0"),
         ({"double": "yes"}, "double='yes'"),
-        ({"obs_scale": [1.0] * (OBS_DIM - 1)}, "obs_scale"),
-        ({"obs_scale": [1.0] * (OBS_DIM + 3)}, "obs_scale"),
-        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [0.0]}, "obs_scale"),
-        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [-2.0]}, "obs_scale"),
-        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [float("nan")]}, "obs_scale"),
-        ({"obs_scale": [1.0] * (OBS_DIM - 1) + [float("inf")]}, "obs_scale"),
+        ({"points": [2, 2]}, "points"),
+        ({"points": [2, 0, 2]}, "points"),
+        ({"points": 1.5}, "points"),
+        ({"bogus": 1}, "bogus"),
     ],
 )
 def test_bad_settings_raise_naming_the_value(kwargs, named):
     with pytest.raises(ValueError) as info:
         _agent(**kwargs)
     assert named in str(info.value)
-    if "obs_scale" not in kwargs:
+    if not {"points", "double", "bogus"} & set(kwargs):
         with pytest.raises(ValueError) as info:
             DQNConfig(**{**SMALL, **kwargs})
         assert named in str(info.value)
@@ -743,7 +766,10 @@ def test_bad_constructor_arguments():
 def test_default_settings_are_valid():
     agent = DQNAgent(M, np.random.default_rng(0))
     assert agent.config == DQNConfig()
-    np.testing.assert_array_equal(agent.obs_scale, np.ones(OBS_DIM, np.float32))
+    np.testing.assert_array_equal(agent.input_scale, np.ones(OBS_DIM, np.float32))
+    config = DQNConfig(lr=5e-4, gamma=0.5)
+    assert DQNAgent(M, np.random.default_rng(0), config).config is config
+    assert DQNAgent(M, np.random.default_rng(0), config, gamma=0.7).config == DQNConfig(lr=5e-4, gamma=0.7)
     assert "dqn" in repr(agent)
 
 
@@ -835,17 +861,18 @@ def test_state_dict_is_what_torch_loads_with_weights_only(tmp_path):
     assert loaded["n_stations"] == M
     assert loaded["config"]["hidden"] == [16, 16]
     assert loaded["rng"] == agent.rng.bit_generator.state
-    assert torch.equal(loaded["torch_rng"], agent.state_dict()["torch_rng"])
 
 
-def test_load_state_dict_restores_the_saved_torch_generator():
+def test_the_state_neither_holds_nor_sets_torchs_global_generator():
+    """torch's global generator is never used after the networks' initialisation (inside fork_rng):
+    a state does not carry it, and loading one leaves it where it was."""
     agent = _mid_training("dqn")
     state = agent.state_dict()
-    saved = state["torch_rng"].clone()
-    torch.rand(100)  # move the global generator on
-    assert not torch.equal(torch.random.get_rng_state(), saved)
+    assert not [k for k in state if "torch" in k]
+    torch.manual_seed(77)
+    before = torch.random.get_rng_state()
     _agent(seed=1, **RESUME).load_state_dict(state)
-    assert torch.equal(torch.random.get_rng_state(), saved)
+    assert torch.equal(torch.random.get_rng_state(), before)
 
 
 @pytest.mark.parametrize(
@@ -873,6 +900,8 @@ def test_load_rejects_a_state_that_is_not_a_dqn_agent():
     agent = _agent()
     with pytest.raises(CheckpointError, match="not a DQN agent"):
         agent.load_state_dict({"format": "evcd.train/1"})
+    with pytest.raises(CheckpointError, match="earlier evcd"):
+        agent.load_state_dict({**agent.state_dict(), "format": "evcd.agents.dqn/1"})
     with pytest.raises(CheckpointError, match="not a DQN agent"):
         agent.load_state_dict([1, 2])  # type: ignore[arg-type]
 
@@ -891,16 +920,25 @@ def test_policy_only_loads_just_the_networks():
     assert fresh.epsilon == fresh.config.epsilon_start
     # and it acts like the trained one
     obs = _obs(np.random.default_rng(6), 50)
-    np.testing.assert_array_equal(fresh.act_batch(obs), trained.act_batch(obs))
+    np.testing.assert_array_equal(_decide(fresh, obs), _decide(trained, obs))
 
 
-def test_a_different_observation_scale_is_taken_from_the_checkpoint():
-    trained = _agent(obs_scale=np.full(OBS_DIM, 0.5, np.float32))
-    other = _agent(seed=3, obs_scale=np.full(OBS_DIM, 2.0, np.float32))
-    other.load_state_dict(trained.state_dict(), policy_only=True)
-    np.testing.assert_array_equal(other.obs_scale, trained.obs_scale)
-    obs = _obs(np.random.default_rng(7), 20)
-    np.testing.assert_array_equal(other.q_values(obs), trained.q_values(obs))
+def test_a_loaded_policy_sees_what_it_was_trained_on():
+    """The checkpoint's input scale wins: a policy trained on raw observations (points 2, 1, 4)
+    loaded into an agent for a normalising environment, or one made with other points, or none,
+    gives the same Q-values on the same physical observations."""
+    trained = _agent(points=[2, 1, 4])
+    raw = np.random.default_rng(7).uniform(0, 3000, size=(20, OBS_DIM)).astype(np.float32)
+    expected = trained.q_values(raw)
+    for kwargs, obs in (
+        ({"points": [2, 1, 4], "normalized": True}, (raw / unit_divisors([2, 1, 4])).astype(np.float32)),
+        ({"points": [3, 3, 3], "normalized": True}, (raw / unit_divisors([3, 3, 3])).astype(np.float32)),
+        ({}, raw),
+    ):
+        other = _agent(seed=3, **kwargs)
+        other.load_state_dict(trained.state_dict(), policy_only=True)
+        np.testing.assert_array_equal(other.input_scale, trained.input_scale)
+        np.testing.assert_allclose(other.q_values(obs), expected, rtol=1e-5)
 
 
 @pytest.mark.parametrize("name", ["dqn", "dueling_ddqn"])
@@ -915,7 +953,7 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
         policy.load(where)
         assert _equal(_params(policy.online), _params(trained.online))
         assert policy.steps == 0  # the policy only
-        np.testing.assert_array_equal(policy.act_batch(obs), trained.act_batch(obs))
+        np.testing.assert_array_equal(_decide(policy, obs), _decide(trained, obs))
     built = make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **RESUME)
     assert _equal(_params(built.online), _params(trained.online))
     config = checkpoint_agent_config(run_dir)
@@ -973,8 +1011,7 @@ def test_no_global_random_state_is_used():
             agent.act(t.obs, explore=True)
             agent.act(t.obs, explore=False)
             agent.observe(t)
-        if exploration == "slot":
-            agent.act_batch(_obs(rng, 5), explore=True)
+        _decide(agent, _obs(rng, 5), explore=True)
         agent.learn()
         agent.update_target()
         agent.state_dict()

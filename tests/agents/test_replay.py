@@ -166,7 +166,7 @@ def test_sum_tree_rejects_bad_indices_and_targets():
     for target in (-0.5, np.nan, 4.5):
         with pytest.raises(ValueError, match="target"):
             tree.find(np.array([1.0, target]))
-    with pytest.raises(ValueError, match="capacity 0"):
+    with pytest.raises(ValueError, match="capacity=0"):
         SumTree(0)
 
 
@@ -240,7 +240,7 @@ def test_importance_weights_by_hand():
     assert batch.weights.max() == 1.0 and 3 in batch.indices  # the last segment holds only leaf 3
     with pytest.raises(ValueError, match=r"probability 0\.0"):
         importance_weights(np.array([0.5, 0.0]), 2, 0.5)
-    with pytest.raises(ValueError, match="beta 2"):
+    with pytest.raises(ValueError, match="beta=2"):
         importance_weights(np.array([0.5]), 2, 2)
 
 
@@ -339,11 +339,12 @@ def test_priorities_of_unfilled_slots_are_never_sampled():
 @pytest.mark.parametrize(
     ("kwargs", "shown"),
     [
-        ({"capacity": 0}, "capacity 0"), ({"capacity": 2.5}, r"capacity 2\.5"),
-        ({"capacity": True}, "capacity True"), ({"obs_dim": 0}, "obs_dim 0"),
-        ({"alpha": -0.1}, r"alpha -0\.1"), ({"alpha": 1.5}, r"alpha 1\.5: must be in \[0, 1\]"),
-        ({"alpha": math.nan}, "alpha nan"),
-        ({"eps": 0.0}, r"eps 0\.0"), ({"eps": -1e-6}, "eps -1e-06"), ({"eps": math.inf}, "eps inf"),
+        ({"capacity": 0}, "capacity=0"), ({"capacity": 2.5}, r"capacity=2\.5"),
+        ({"capacity": True}, "capacity=True"), ({"obs_dim": 0}, "obs_dim=0"),
+        ({"alpha": -0.1}, r"alpha=-0\.1"),
+        ({"alpha": 1.5}, r"alpha=1\.5: must be a finite number in \[0, 1\]"),
+        ({"alpha": math.nan}, "alpha=nan"),
+        ({"eps": 0.0}, r"eps=0\.0"), ({"eps": -1e-6}, "eps=-1e-06"), ({"eps": math.inf}, "eps=inf"),
     ],
 )  # fmt: skip
 def test_constructor_rejects_bad_arguments(kwargs, shown):
@@ -357,7 +358,7 @@ def test_sample_rejects_bad_arguments_and_empty_buffer():
     with pytest.raises(ValueError, match="empty"):
         buf.sample(4, rng, 0.4)
     buf.add(_obs(0), 0, 0.0, _obs(1), False, False)
-    for batch_size, beta, shown in ((0, 0.4, "batch_size 0"), (4, -0.1, "beta -0.1"), (4, 1.1, "beta 1.1")):
+    for batch_size, beta, shown in ((0, 0.4, "batch_size=0"), (4, -0.1, "beta=-0.1"), (4, 1.1, "beta=1.1")):
         with pytest.raises(ValueError, match=shown):
             buf.sample(batch_size, rng, beta)
 
@@ -467,15 +468,17 @@ def test_load_state_rejects_mismatches_and_changes_nothing():
         ({**state, "priorities": np.where(np.arange(50) == 7, np.nan, state["priorities"])}, "priority nan"),
         ({**state, "priorities": -state["priorities"]}, "priority -"),
         ({**state, "size": 51}, "size 51"),
-        ({**state, "alpha": 2.0}, "alpha 2.0"),
+        ({**state, "alpha": 2.0}, "alpha=2.0"),
     ]
     for bad, shown in bad_states:
         with pytest.raises(ValueError, match=shown):
             target.load_state_dict(bad)
         _assert_same_state(target, _filled(50, alpha=0.3))
-    assert before.keys() == target.state_dict().keys()
+    after = target.state_dict()
+    for key, value in before.items():  # every array and counter as it was before the refused loads
+        np.testing.assert_array_equal(after[key], value, err_msg=key)
 
 
 def test_module_does_not_import_torch():
-    code = "import sys, evcd.agents.replay, evcd.replay_bench; assert 'torch' not in sys.modules"
+    code = "import sys, evcd.agents.replay, evcd.bench.replay; assert 'torch' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import libsumo
@@ -9,11 +11,11 @@ import numpy as np
 import pytest
 
 from evcd.agents import make_agent_for_env
-from evcd.agents.base import Agent
+from evcd.agents.base import Agent, EpisodeState
 from evcd.agents.dqn import DQNAgent
-from evcd.env.batched import BatchedRunner
-from evcd.env.runner import EpisodeSpec, SingleEnvRunner
-from evcd.evaluate import episode_specs
+from evcd.agents.heuristics import FixedStationAgent as Fixed
+from evcd.env.runners import BatchedRunner, EpisodeSpec, SingleEnvRunner
+from evcd.loops.seeds import episode_specs
 from evcd.sim.driver import SumoDriver
 from tests.env.handmade import TO_CS2, car, ev
 
@@ -21,17 +23,11 @@ CS1, CS2 = 0, 1
 NEAR_CS2 = {"departure": 100, "origin": "D2C2", "depart_pos": 20.0}
 
 
-class Fixed(Agent):
-    """Always the same station."""
+@dataclass
+class Seen(EpisodeState):
+    """The observations of one episode of :class:`Recorder`."""
 
-    name = "fixed"
-
-    def __init__(self, n_stations: int, rng: np.random.Generator, station: int) -> None:
-        super().__init__(n_stations, rng)
-        self.station = station
-
-    def act(self, obs: np.ndarray, explore: bool = False) -> int:
-        return self.station
+    observations: list[np.ndarray] = field(default_factory=list)
 
 
 class Recorder(Agent):
@@ -40,25 +36,22 @@ class Recorder(Agent):
     name = "recorder"
 
     def __init__(self, n_stations: int, plan: Any) -> None:
-        super().__init__(n_stations, np.random.default_rng(0))
-        self.plan = plan
         self.seen: list[list[np.ndarray]] = []
-        self.current: list[np.ndarray] = []
+        super().__init__(n_stations, np.random.default_rng(0))
+        self.seen.clear()  # the construction's own episode is not one
+        self.plan = plan
 
-    def begin_episode(self, rng: np.random.Generator | None = None) -> None:
-        super().begin_episode(rng)
-        self.current = []
-        self.seen.append(self.current)
+    def new_episode(self, rng: np.random.Generator) -> Seen:
+        episode = Seen(rng)
+        self.seen.append(episode.observations)
+        return episode
 
-    def episode_state(self) -> Any:
-        return (self.rng, self.current)
-
-    def set_episode_state(self, state: Any) -> None:
-        self.rng, self.current = state
-
-    def act(self, obs: np.ndarray, explore: bool = False) -> int:
-        self.current.append(np.asarray(obs).copy())
-        return int(self.plan(len(self.current) - 1))
+    def decide(self, obs: np.ndarray, episodes: Sequence[Seen], explore: bool = False) -> np.ndarray:
+        actions = []
+        for o, episode in zip(obs, episodes, strict=True):
+            episode.observations.append(np.asarray(o).copy())
+            actions.append(int(self.plan(len(episode.observations) - 1)))
+        return np.array(actions, dtype=np.int64)
 
 
 def specs_with(options: list[dict[str, Any]]) -> list[EpisodeSpec]:
@@ -235,7 +228,7 @@ def dataclass_no_wall(row):
     return {k: v for k, v in row.__dict__.items() if k != "wall_s"}
 
 
-def test_act_episodes_equals_act_with_each_episodes_state(make_env):
+def test_decide_on_many_episodes_equals_act_on_each(make_env):
     env = make_env()
     for exploration in ("slot", "episode"):
         agents = [
@@ -243,11 +236,8 @@ def test_act_episodes_equals_act_with_each_episodes_state(make_env):
             for _ in range(2)
         ]
         obs = np.random.default_rng(2).uniform(0, 3000, size=(6, 9)).astype(np.float32)
-        states = []
-        for i in range(6):
-            agents[0].begin_episode(np.random.default_rng(100 + i))
-            states.append(agents[0].episode_state())
-        batched, _ = agents[0].act_episodes(obs, states, explore=True)
+        states = [agents[0].new_episode(np.random.default_rng(100 + i)) for i in range(6)]
+        batched = agents[0].decide(obs, states, explore=True)
         one_by_one = []
         for i in range(6):
             agents[1].begin_episode(np.random.default_rng(100 + i))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.env.conftest import WINDOW, run_episode
+from tests.conftest import WINDOW, run_episode
 
 
 def assert_same_episode(a: dict, b: dict) -> None:

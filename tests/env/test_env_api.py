@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env
 from evcd.env import ENV_ID, ChargingNavEnv
 from evcd.scenario.scenario import JURONG_WEST, STATIONS_FILE
 from evcd.sim.driver import SumoDriver
-from tests.env.conftest import GRID_ENV, run_episode
+from tests.conftest import GRID_ENV, run_episode
 
 
 def test_check_env_passes_on_the_grid(grid_env_dir, env_cache):

@@ -7,7 +7,7 @@ import pytest
 
 from evcd.env import TARGET_ID
 from evcd.sim.driver import SumoDriver
-from tests.env.conftest import run_episode
+from tests.conftest import run_episode
 from tests.env.handmade import TO_CS2, car, ev
 
 CS1, CS2 = 0, 1

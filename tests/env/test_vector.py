@@ -7,7 +7,7 @@ import pytest
 
 from evcd.env import make_vector_env
 from evcd.sim.driver import SumoDriver
-from tests.env.conftest import GRID_ENV
+from tests.conftest import GRID_ENV
 
 
 def test_two_workers_step_independently(grid_env_dir, env_cache):

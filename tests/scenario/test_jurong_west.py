@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from evcd.report.scenario import station_distance_matrix
 from evcd.scenario.demand import DemandConfig, generate_demand, write_demand
 from evcd.scenario.scenario import JURONG_WEST, load_scenario
-from evcd.scenario_report import station_distance_matrix
 from evcd.sim.day import simulate_day
 
 pytestmark = pytest.mark.slow

@@ -25,7 +25,6 @@ from evcd.scenario.graphml import (
     merge_signal_clusters,
     read_graphml,
     road_edges,
-    write_plain_xml,
 )
 from evcd.scenario.netstats import network_summary
 from evcd.scenario.network import (
@@ -33,6 +32,7 @@ from evcd.scenario.network import (
     largest_strongly_connected,
     passenger_successors,
 )
+from evcd.scenario.plain_xml import write_plain_xml
 
 REPO = Path(__file__).resolve().parents[2]
 COMMITTED_NET = REPO / "sumo_net" / "jurong_west" / "net.net.xml.gz"

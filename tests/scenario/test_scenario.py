@@ -13,24 +13,24 @@ from evcd.scenario.stations_file import read_stations, write_stations
 
 
 @pytest.fixture
-def scenario_copy(grid_scenario_dir: Path, tmp_path: Path) -> Path:
+def scenario_copy(grid_env_dir: Path, tmp_path: Path) -> Path:
     dst = tmp_path / "copy"
-    shutil.copytree(grid_scenario_dir, dst)
+    shutil.copytree(grid_env_dir, dst)
     return dst
 
 
-def test_loads_and_overrides_points(grid_scenario_dir):
-    sc = load_scenario(grid_scenario_dir)
+def test_loads_and_overrides_points(grid_env_dir):
+    sc = load_scenario(grid_env_dir)
     assert len(sc.stations) == 3 and all(s.points == 2 for s in sc.stations)
     assert sc.additional_files == [
-        grid_scenario_dir.resolve() / VTYPES_FILE,
-        grid_scenario_dir.resolve() / STATIONS_FILE,
+        grid_env_dir.resolve() / VTYPES_FILE,
+        grid_env_dir.resolve() / STATIONS_FILE,
     ]
-    assert all(s.points == 4 for s in load_scenario(grid_scenario_dir, charging_points=4).stations)
+    assert all(s.points == 4 for s in load_scenario(grid_env_dir, charging_points=4).stations)
 
 
-def test_stations_file_round_trip(grid_scenario_dir, tmp_path):
-    stations = read_stations(grid_scenario_dir / STATIONS_FILE)
+def test_stations_file_round_trip(grid_env_dir, tmp_path):
+    stations = read_stations(grid_env_dir / STATIONS_FILE)
     write_stations(stations, tmp_path / "s.add.xml")
     assert read_stations(tmp_path / "s.add.xml") == stations
 
@@ -73,6 +73,6 @@ def test_two_networks_are_ambiguous(scenario_copy):
         load_scenario(scenario_copy)
 
 
-def test_bad_charging_points(grid_scenario_dir):
+def test_bad_charging_points(grid_env_dir):
     with pytest.raises(ValueError, match="charging_points=0"):
-        load_scenario(grid_scenario_dir, charging_points=0)
+        load_scenario(grid_env_dir, charging_points=0)

@@ -1,0 +1,102 @@
+"""The hyperparameters of the DQN agent, declared once.
+
+:class:`DQNConfig` is the one declaration: :class:`~evcd.agents.dqn.DQNAgent` takes it whole, and
+Hydra's ``learner`` block is built from it as a structured config (``conf/learner/*.yaml`` extend it,
+:mod:`evcd.cli.schema`), so a key that is not a field, or a value of the wrong type, is refused when
+the config is composed, and a value out of range when the agent is made.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+from evcd.agents.networks import check_hidden
+from evcd.utils.validation import check_choice, check_int, check_real
+
+LOSSES = ("mse", "huber")
+EXPLORATIONS = ("slot", "episode")
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """A DQN agent's hyperparameters; validated on creation (``ValueError`` naming the value).
+
+    Attributes:
+        hidden: hidden layer sizes of the MLP trunk.
+        lr: Adam learning rate.
+        batch_size: transitions per gradient step.
+        buffer_size: replay capacity (transitions).
+        gamma: discount per decision slot.
+        learning_starts: transitions stored before the first gradient step.
+        train_freq: a round of learning every this many transitions.
+        gradient_steps: gradient steps per round.
+        target_update: gradient steps between target-network updates.
+        tau: target update ``target <- tau * online + (1 - tau) * target``; 1 is a hard copy.
+        epsilon_start: exploration rate at the first transition ...
+        epsilon_end: ... moving linearly to this ...
+        exploration_steps: ... over this many transitions.
+        exploration: ``"slot"`` (an epsilon-greedy draw at every decision, the textbook form) or
+            ``"episode"`` (one draw per episode: with probability epsilon the whole episode drives to
+            one random station, like the Random baseline, instead of zig-zagging).
+        alpha: priority exponent of the prioritized replay (0: uniform replay).
+        beta_start: importance-sampling exponent at the first transition, annealed linearly to 1 ...
+        beta_steps: ... over this many transitions.
+        priority_eps: added to ``|TD error|`` so that no priority is zero.
+        loss: ``"mse"`` (the paper's) or ``"huber"``; both weighted by the importance weights.
+        max_grad_norm: clip the gradient's global norm to this (``None``: no clipping).
+        reward_scale: rewards are multiplied by this before learning (the paper's reward reaches
+            tens; a scale keeps the regression targets near 1).
+    """
+
+    hidden: tuple[int, ...] = (512, 256)
+    lr: float = 1e-3
+    batch_size: int = 32
+    buffer_size: int = 10_000
+    gamma: float = 0.99
+    learning_starts: int = 100
+    train_freq: int = 1
+    gradient_steps: int = 1
+    target_update: int = 8000
+    tau: float = 1.0
+    epsilon_start: float = 1.0
+    epsilon_end: float = 0.1
+    exploration_steps: int = 1000
+    exploration: str = "slot"
+    alpha: float = 0.6
+    beta_start: float = 0.4
+    beta_steps: int = 1000
+    priority_eps: float = 1e-6
+    loss: str = "mse"
+    max_grad_norm: float | None = 10.0
+    reward_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "hidden", check_hidden(self.hidden))
+        for key in ("batch_size", "buffer_size", "train_freq", "gradient_steps", "target_update"):
+            check_int(key, getattr(self, key), minimum=1)
+        for key in ("learning_starts", "exploration_steps", "beta_steps"):
+            check_int(key, getattr(self, key), minimum=0)
+        if self.buffer_size < self.batch_size:
+            raise ValueError(f"buffer_size={self.buffer_size} < batch_size={self.batch_size}: the buffer "
+                             "must hold at least one batch")  # fmt: skip
+        for key in ("lr", "reward_scale", "priority_eps"):
+            check_real(key, getattr(self, key), low=0.0, low_open=True)
+        for key in ("gamma", "epsilon_start", "epsilon_end", "alpha", "beta_start"):
+            check_real(key, getattr(self, key), low=0.0, high=1.0)
+        check_real("tau", self.tau, low=0.0, high=1.0, low_open=True)
+        check_choice("exploration", self.exploration, EXPLORATIONS)
+        check_choice("loss", self.loss, LOSSES)
+        if self.max_grad_norm is not None:
+            check_real("max_grad_norm", self.max_grad_norm, low=0.0, low_open=True)
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """The hyperparameters' names."""
+        return tuple(f.name for f in fields(cls))
+
+
+def linear_schedule(start: float, end: float, steps: int, t: int) -> float:
+    """``start`` moving linearly to ``end`` over ``steps`` steps, then ``end`` (``steps = 0``: ``end``)."""
+    if steps <= 0 or t >= steps:
+        return float(end)
+    return float(start + (end - start) * t / steps)

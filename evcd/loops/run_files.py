@@ -1,0 +1,110 @@
+"""What a run writes: the files' names, and the episodes and results files (read back by
+:mod:`evcd.report`).
+
+A run directory (``scripts/train.py``) holds ``train_episodes.csv``, ``episodes.csv``,
+``baseline_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/`` and
+``tensorboard/``; ``scripts/evaluate.py`` writes ``episodes.csv`` and ``results.json``. Every file is
+written atomically; none already there is overwritten unless asked.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from evcd.env.runners.base import EpisodeRow
+from evcd.loops.stats import EvalResult
+from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
+
+CHECKPOINTS = "checkpoints"
+TENSORBOARD = "tensorboard"
+TRAIN_CSV = "train_episodes.csv"
+EVAL_CSV = "episodes.csv"
+BASELINE_CSV = "baseline_episodes.csv"
+RESULTS_JSON = "results.json"
+CURVE_PNG = "learning_curve.png"
+#: The files of a finished run (a new run refuses a directory that holds one of them).
+OUTPUTS = (TRAIN_CSV, EVAL_CSV, BASELINE_CSV, RESULTS_JSON, CURVE_PNG)
+
+CSV_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(EpisodeRow))
+
+
+def refuse_clobber(path: Path, overwrite: bool) -> None:
+    """Refuse to replace ``path`` unless ``overwrite``.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is false.
+    """
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists: refusing to overwrite it (pass overwrite=True)")
+
+
+def episodes_csv_text(rows: Sequence[EpisodeRow]) -> str:
+    """``rows`` as CSV text with a header (floats written with ``repr`` precision)."""
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow(dataclasses.asdict(row))
+    return buf.getvalue()
+
+
+def read_episodes_csv(path: str | Path) -> list[EpisodeRow]:
+    """The rows of an ``episodes.csv`` (or ``train_episodes.csv``) written by :func:`episodes_csv_text`.
+
+    Raises:
+        ValueError: the file lacks a column of :class:`EpisodeRow` (the message names the file).
+    """
+    types = {f.name: f.type for f in dataclasses.fields(EpisodeRow)}
+    convert = {"int": int, "float": float, "str": str, "bool": lambda v: v == "True"}
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        missing = [k for k in CSV_FIELDS if k not in (reader.fieldnames or ()) and k != "switches"]
+        if missing:
+            raise ValueError(f"{path}: not an episodes file (missing columns {missing})")
+        return [
+            EpisodeRow(**{k: convert[types[k]](v) for k, v in row.items() if k in types}) for row in reader
+        ]
+
+
+def write_episodes_csv(result: EvalResult, path: str | Path, overwrite: bool = False) -> Path:
+    """Write the per-episode rows to ``path`` atomically.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is false.
+    """
+    path = Path(path)
+    refuse_clobber(path, overwrite)
+    return atomic_write_text(path, episodes_csv_text(result.rows))
+
+
+def results_dict(result: EvalResult, config: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The content of ``results.json``: agent, seed, summary, per-episode rows, optional config, and
+    the agent's own extras (:attr:`EvalResult.extra`, e.g. ``hindsight``)."""
+    return json_floats(
+        {
+            "agent": result.agent,
+            "seed": result.seed,
+            "summary": dataclasses.asdict(result.summary),
+            "episodes": [dataclasses.asdict(r) for r in result.rows],
+            "config": dict(config) if config is not None else None,
+            **result.extra,
+        }
+    )
+
+
+def write_results_json(
+    result: EvalResult, path: str | Path, config: Mapping[str, Any] | None = None, overwrite: bool = False
+) -> Path:
+    """Write :func:`results_dict` to ``path`` atomically (strict JSON: NaN becomes ``null``).
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is false.
+    """
+    path = Path(path)
+    refuse_clobber(path, overwrite)
+    return atomic_write_json(path, results_dict(result, config))

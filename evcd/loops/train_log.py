@@ -1,0 +1,90 @@
+"""TensorBoard curves of a training run (``tensorboard --logdir outputs/``).
+
+Tags, all at ``global_step`` = transitions seen (so that a resumed run can purge what the
+interrupted one wrote after its last checkpoint):
+
+- ``charts/travel_time``, ``charts/episodic_return``, ``charts/queue_wait``, ``charts/switches``,
+  ``charts/truncated`` (per training episode), ``charts/epsilon``, ``charts/transitions_per_second``;
+- ``losses/td_loss`` and ``losses/q_values``: means over the gradient steps of the episode;
+- ``eval/travel_time`` (the agent), ``eval/baseline_travel_time``, ``eval/paired_difference``;
+- the run's resolved configuration as text (``config``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from torch.utils.tensorboard import SummaryWriter
+
+from evcd.env.runners.base import EpisodeRow
+
+
+class TrainLog:
+    """A TensorBoard writer for one run directory.
+
+    Args:
+        log_dir: the event files' folder.
+        purge_step: on resume, the global step of the checkpoint: events the interrupted run wrote
+            at or after it are hidden, so every curve shows each step once.
+    """
+
+    def __init__(self, log_dir: str | Path, purge_step: int | None = None) -> None:
+        self.writer = SummaryWriter(str(log_dir), purge_step=purge_step)
+        self._totals: tuple[float, float, float] | None = None
+
+    def config(self, config: Mapping[str, Any], agent: str) -> None:
+        """Record the resolved configuration and the agent's description as text."""
+        text = json.dumps(config, indent=2, default=str)
+        self.writer.add_text("config", f"agent: `{agent}`\n\n```\n{text}\n```", 0)
+
+    def start(self, stats: Mapping[str, float]) -> None:
+        """Take the agent's cumulative counters as the origin of the per-episode loss means."""
+        self._totals = self._read(stats)
+
+    @staticmethod
+    def _read(stats: Mapping[str, float]) -> tuple[float, float, float]:
+        return (stats.get("gradient_steps", 0.0), stats.get("loss_total", 0.0), stats.get("q_total", 0.0))
+
+    def episode(self, row: EpisodeRow, stats: Mapping[str, float], step: int, wall_s: float) -> None:
+        """Log one training episode (``stats``: the agent's :meth:`~evcd.agents.Agent.stats` after it)."""
+        w = self.writer
+        w.add_scalar("charts/travel_time", row.travel_time, step)
+        w.add_scalar("charts/episodic_return", row.episode_return, step)
+        w.add_scalar("charts/queue_wait", row.queue_wait, step)
+        w.add_scalar("charts/switches", row.switches, step)
+        w.add_scalar("charts/truncated", float(row.truncated), step)
+        if "epsilon" in stats:
+            w.add_scalar("charts/epsilon", stats["epsilon"], step)
+        if wall_s > 0:
+            w.add_scalar("charts/transitions_per_second", step / wall_s, step)
+        now = self._read(stats)
+        before = self._totals if self._totals is not None else now
+        steps = now[0] - before[0]
+        if steps > 0:
+            w.add_scalar("losses/td_loss", (now[1] - before[1]) / steps, step)
+            w.add_scalar("losses/q_values", (now[2] - before[2]) / steps, step)
+        self._totals = now
+
+    def evaluation(
+        self, evaluation: Any, baseline: Any | None, paired: Mapping[str, Any] | None, step: int
+    ) -> None:
+        """Log the evaluation means (an :class:`~evcd.loops.evaluate.EvalResult` each) at ``step``."""
+        value = evaluation.summary.mean_travel_time
+        if math.isfinite(value):
+            self.writer.add_scalar("eval/travel_time", value, step)
+        if baseline is not None and math.isfinite(baseline.summary.mean_travel_time):
+            self.writer.add_scalar("eval/baseline_travel_time", baseline.summary.mean_travel_time, step)
+        if paired is not None and math.isfinite(paired["mean_difference"]):
+            self.writer.add_scalar("eval/paired_difference", paired["mean_difference"], step)
+
+    def flush(self) -> None:
+        """Write pending events to disk."""
+        self.writer.flush()
+
+    def close(self) -> None:
+        """Flush and close."""
+        self.writer.close()

@@ -1,0 +1,130 @@
+"""Where a training run stands, and how it survives being killed: checkpoints and resume.
+
+Every ``checkpoint_every`` episodes and at the end the trainer writes the agent (networks, optimizer,
+replay, counters, generators), the trainer's position (:class:`TrainState`: episodes done, their
+rows) and the run's config, atomically (:mod:`evcd.utils.checkpoint`). A resumed run loads them and
+refuses a config that differs (but in :data:`RESUME_FREE_KEYS`); since an episode depends only on its
+seed and the agent's state, it ends with exactly the weights of an uninterrupted run. A new run never
+enters a directory that holds a checkpoint or results (:func:`check_run_dir`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from evcd.agents.base import Agent
+from evcd.env.runners.base import EpisodeRow
+from evcd.loops.run_files import CHECKPOINTS, OUTPUTS, RESULTS_JSON
+from evcd.utils.checkpoint import CheckpointError, has_checkpoint, load_checkpoint, save_checkpoint
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FORMAT = "evcd.train/1"
+#: Config keys that may differ between a run and its resumption.
+RESUME_FREE_KEYS = frozenset({"resume", "progress"})
+
+
+@dataclass
+class TrainState:
+    """Where training stands (saved in every checkpoint)."""
+
+    episodes_done: int = 0
+    transitions: int = 0
+    wall_s: float = 0.0  # training wall time over every session (day builds excluded)
+    prepare_s: float = 0.0  # day builds of the training runner
+    sessions: int = 0  # how many times training was started or resumed
+    rows: list[EpisodeRow] = dataclasses.field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values for the checkpoint."""
+        d = dataclasses.asdict(self)
+        d["rows"] = [dataclasses.asdict(r) for r in self.rows]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> TrainState:
+        """The inverse of :meth:`to_dict`."""
+        values = dict(d)
+        values["rows"] = [EpisodeRow(**r) for r in values["rows"]]
+        return cls(**values)
+
+
+def check_run_dir(run_dir: Path, resume: bool) -> None:
+    """Refuse to start a new run where one already wrote, or to resume where nothing was written.
+
+    Raises:
+        FileExistsError: a new run (``resume=False``) in a directory holding a checkpoint or results.
+        FileNotFoundError: ``resume=True`` but the directory holds no checkpoint and no results.
+    """
+    ckpt = run_dir / CHECKPOINTS
+    written = [name for name in OUTPUTS if (run_dir / name).exists()]
+    if not resume and (has_checkpoint(ckpt) or written):
+        found = "a checkpoint" if has_checkpoint(ckpt) else ", ".join(written)
+        raise FileExistsError(
+            f"{run_dir} already holds {found}: pass resume=true to continue that run, or use a new "
+            "run directory (nothing there is overwritten)"
+        )
+    if resume and not has_checkpoint(ckpt) and not (run_dir / RESULTS_JSON).exists():
+        raise FileNotFoundError(
+            f"resume=true but {run_dir} holds no checkpoint ({ckpt / 'latest.json'} is missing): "
+            "resume needs the run directory of an earlier training run (hydra.run.dir=...)"
+        )
+
+
+def config_diff(saved: Mapping[str, Any], current: Mapping[str, Any], prefix: str = "") -> list[str]:
+    """``"key: saved -> current"`` for every setting that differs (nested keys dotted), but those of
+    :data:`RESUME_FREE_KEYS`."""
+    keys = sorted(set(saved) | set(current))
+    out = []
+    for key in keys:
+        name = f"{prefix}{key}"
+        if not prefix and key in RESUME_FREE_KEYS:
+            continue
+        a, b = saved.get(key, "<missing>"), current.get(key, "<missing>")
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            out += config_diff(a, b, f"{name}.")
+        elif a != b:
+            out.append(f"{name}: {a!r} -> {b!r}")
+    return out
+
+
+def save_training(run_dir: Path, agent: Agent, state: TrainState, config: Mapping[str, Any] | None) -> None:
+    """Write the agent, the trainer's position and the config as the run's latest checkpoint."""
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "agent": agent.state_dict(),  # type: ignore[attr-defined]
+        "trainer": state.to_dict(),
+        "config": dict(config) if config is not None else None,
+    }
+    path = save_checkpoint(run_dir / CHECKPOINTS, payload, f"ckpt_{state.episodes_done:07d}")
+    log.info("checkpoint after %d episodes: %s", state.episodes_done, path)
+
+
+def restore_training(run_dir: Path, agent: Agent, config: Mapping[str, Any] | None) -> TrainState:
+    """Load the run's latest checkpoint into ``agent``; the trainer's position.
+
+    Raises:
+        CheckpointError: not a training checkpoint, or damaged.
+        ValueError: ``config`` differs from the checkpoint's run (the message names each difference).
+    """
+    payload = load_checkpoint(run_dir / CHECKPOINTS)
+    if payload.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"{run_dir / CHECKPOINTS}: not a training checkpoint (format "
+                              f"{payload.get('format')!r}, expected {CHECKPOINT_FORMAT!r})")  # fmt: skip
+    saved = payload.get("config")
+    if config is not None and saved is not None:
+        diff = config_diff(saved, config)
+        if diff:
+            raise ValueError(
+                "resume=true with settings that differ from the checkpoint's run (a resumed run "
+                "must continue the same experiment): " + "; ".join(diff)
+            )
+    agent.load_state_dict(payload["agent"])  # type: ignore[attr-defined]
+    state = TrainState.from_dict(payload["trainer"])
+    log.info("resuming after %d training episodes (%d transitions)", state.episodes_done, state.transitions)
+    return state

@@ -1,0 +1,46 @@
+"""The engine benchmark's measurements, on the small grid (real SUMO; figures only sanity-checked)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from evcd.bench import engines as engine_bench
+from tests.conftest import GRID_ENV
+
+
+@pytest.fixture
+def grid_kwargs(grid_env_dir, env_cache) -> dict:
+    return {"scenario": grid_env_dir, "cache_dir": env_cache, **GRID_ENV}
+
+
+def test_compare_engines_reports_every_policy_and_batch_size(grid_kwargs):
+    out = engine_bench.compare_engines(grid_kwargs, 8, [1, 4])
+    names = {"greedy", "fixed0", "fixed1", "fixed2"}
+    assert set(out["single"]) == names and set(out["batched"]) == {"1", "4"}
+    for b in ("1", "4"):
+        assert set(out["summary"][b]) == names
+        for name, s in out["summary"][b].items():
+            assert len(out["batched"][b][name]["T"]) == 8
+            assert 0 <= s["identical_share"] <= 1
+            if name.startswith("fixed"):  # a fixed station ends where it was sent
+                assert s["same_station_share"] == 1.0
+            assert s["mean_abs_dT"] <= s["max_abs_dT"]
+    # one target per simulation starts like the single environment: (nearly) identical
+    assert out["summary"]["1"]["greedy"]["identical_share"] >= 0.75
+
+
+def test_rates_and_scaling_are_measured(grid_kwargs):
+    rates = engine_bench.engine_rates(grid_kwargs, 2, 6, 3)
+    assert rates["single"]["episodes"] == 2 and rates["batched"]["episodes"] == 6
+    assert all(r["episodes_per_s"] > 0 and r["transitions"] >= r["episodes"] for r in rates.values())
+    scaling = engine_bench.parallel_scaling(grid_kwargs, 4, 2)
+    assert scaling["scaling"] > 0 and math.isfinite(scaling["scaling"])
+
+
+def test_table_minutes_adds_up():
+    # 7 evaluation runs of 10 s, a 20 s hindsight run, 2 trainings of 100 s: 290 s per job; 15 jobs,
+    # two at a time at 1.5x; plus 3 x 2 day builds of 30 s
+    minutes = engine_bench.table_minutes(10.0, 20.0, 100.0, 1.5, day_build_s=30.0)
+    assert minutes == pytest.approx((15 * 290 / 1.5 + 180) / 60)

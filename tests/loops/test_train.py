@@ -1,0 +1,321 @@
+"""The trainer (:mod:`evcd.loops.train`) on the toy dispatch problem: files, curves, resume, refusals.
+
+Real torch, real TensorBoard files; the environment is ``tests/agents/toy_env.py`` (no SUMO), so that
+every property of the loop is checked in seconds. ``tests/test_train_script.py`` runs the same loop
+through ``scripts/train.py`` on a real SUMO scenario.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from evcd.agents import make_agent
+from evcd.env.runners import EpisodeRow, SingleEnvRunner
+from evcd.loops.run_files import CHECKPOINTS, RESULTS_JSON, TRAIN_CSV
+from evcd.loops.seeds import EVAL_STREAM, TRAIN_STREAM, bootstrap_rng, episode_specs
+from evcd.loops.stats import paired_difference
+from evcd.loops.train import TrainSettings, train_and_evaluate
+from evcd.loops.train_state import check_run_dir
+from evcd.utils.checkpoint import CheckpointError, load_checkpoint
+from tests.agents.toy_env import ToyDispatchEnv
+from tests.conftest import run_script
+
+SMALL = {"hidden": (16, 16), "lr": 1e-3, "batch_size": 8, "buffer_size": 200, "gamma": 0.9,
+         "learning_starts": 16, "target_update": 20, "exploration_steps": 60, "beta_steps": 100,
+         "reward_scale": 0.01}  # fmt: skip
+CONFIG = {"agent": "dqn", "learner": {"lr": 1e-3}, "seed": 3, "progress": False}
+
+
+def learner(seed: int = 3, name: str = "dueling_ddqn"):
+    return make_agent(name, 3, np.random.default_rng(seed), **SMALL)
+
+
+def toy_runners(phase: str) -> SingleEnvRunner:
+    return SingleEnvRunner(ToyDispatchEnv())
+
+
+def greedy():
+    return make_agent("greedy", 3, np.random.default_rng(0))
+
+
+def settings(**kw) -> TrainSettings:
+    base = {"episodes": 30, "eval_episodes": 12, "seed": 3, "checkpoint_every": 10, "progress": False,
+            "resamples": 500}  # fmt: skip
+    return TrainSettings(**{**base, **kw})
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+class InterruptedRunner(SingleEnvRunner):
+    """Raises ``KeyboardInterrupt`` once ``after`` episodes have ended (a run stopped by the user)."""
+
+    def __init__(self, env, after: int) -> None:
+        super().__init__(env)
+        self.after, self.count = after, 0
+
+    def run(self, specs, agent, *, on_episode=None, **kw):
+        def count(row):
+            on_episode(row)
+            self.count += 1
+            if self.count == self.after:
+                raise KeyboardInterrupt
+
+        return super().run(specs, agent, on_episode=count, **kw)
+
+
+def interrupted_after(episodes: int):
+    """Runners whose training phase is interrupted after ``episodes`` episodes."""
+    return lambda phase: (
+        InterruptedRunner(ToyDispatchEnv(), episodes) if phase == "train" else toy_runners(phase)
+    )
+
+
+# ---------------------------------------------------------------------------------------- statistics
+def _row(i: int, seed: int, travel: float, truncated: bool = False) -> EpisodeRow:
+    return EpisodeRow(i, seed, 0.0, "", 0, "0", 0, "s0", travel, 0.0, "charging", truncated, 1.0, 0.1)
+
+
+def test_paired_difference_by_hand():
+    agent = [_row(0, 10, 100.0), _row(1, 11, 300.0), _row(2, 12, 50.0, truncated=True), _row(3, 13, 80.0)]
+    base = [_row(0, 10, 120.0), _row(1, 11, 250.0), _row(2, 12, 60.0), _row(3, 13, 80.0)]
+    p = paired_difference(agent, base, np.random.default_rng(0), resamples=2000)
+    # pairs where both charged: (100, 120), (300, 250), (80, 80) -> differences -20, +50, 0
+    assert p["pairs"] == 3 and p["mean_difference"] == pytest.approx(10.0)
+    assert (p["agent_faster"], p["equal"], p["agent_slower"]) == (1, 1, 1)
+    assert p["agent_mean"] == pytest.approx(160.0) and p["baseline_mean"] == pytest.approx(150.0)
+    assert -20.0 <= p["ci_low"] <= 10.0 <= p["ci_high"] <= 50.0
+    with pytest.raises(ValueError, match="episodes differ"):
+        paired_difference(agent, base[::-1], np.random.default_rng(0))
+
+
+def test_training_and_evaluation_seeds_are_disjoint_streams():
+    train = {s.reset_seed for s in episode_specs(0, range(2000), TRAIN_STREAM)}
+    evaluation = {s.reset_seed for s in episode_specs(0, range(2000), EVAL_STREAM)}
+    assert len(train) == len(evaluation) == 2000 and not train & evaluation
+
+
+@pytest.mark.parametrize(
+    "kw,needle",
+    [({"episodes": -1}, "episodes=-1"), ({"eval_episodes": 0}, "eval_episodes=0"), ({"seed": -2}, "seed=-2"),
+     ({"checkpoint_every": 1.5}, "checkpoint_every=1.5"), ({"resamples": 0}, "resamples=0")],
+)  # fmt: skip
+def test_bad_settings_are_named(kw, needle):
+    with pytest.raises(ValueError, match=needle):
+        settings(**kw)
+
+
+# ---------------------------------------------------------------------------------------- a whole run
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """One uninterrupted run of 30 training episodes (checkpoints every 10)."""
+    torch.set_num_threads(1)
+    run_dir = tmp_path_factory.mktemp("train") / "run"
+    agent = learner()
+    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baseline=greedy(), config=CONFIG)
+    return run_dir, agent, result
+
+
+def test_a_run_writes_every_file(trained):
+    run_dir, _agent, _result = trained
+    for name in ("train_episodes.csv", "episodes.csv", "baseline_episodes.csv", "results.json",
+                 "learning_curve.png", "checkpoints/latest.json"):  # fmt: skip
+        assert (run_dir / name).is_file(), name
+    train_rows = read_csv(run_dir / TRAIN_CSV)
+    assert [int(r["episode"]) for r in train_rows] == list(range(30))
+    assert [int(r["seed"]) for r in train_rows] == [
+        s.reset_seed for s in episode_specs(3, range(30), TRAIN_STREAM)
+    ]
+    eval_rows = read_csv(run_dir / "episodes.csv")
+    base_rows = read_csv(run_dir / "baseline_episodes.csv")
+    assert (
+        [r["seed"] for r in eval_rows]
+        == [r["seed"] for r in base_rows]
+        == [str(s.reset_seed) for s in episode_specs(3, range(12), EVAL_STREAM)]
+    )
+    assert all(len(set(r["choices"].split("-"))) >= 1 for r in base_rows)
+
+
+def test_results_json_holds_training_evaluation_and_the_paired_comparison(trained):
+    run_dir, agent, _result = trained
+    data = json.loads((run_dir / RESULTS_JSON).read_text())
+    assert {
+        "agent",
+        "seed",
+        "summary",
+        "episodes",
+        "config",
+        "training",
+        "baseline",
+        "paired_vs_baseline",
+    } <= set(data)
+    t = data["training"]
+    transitions = sum(len(r["choices"].split("-")) for r in read_csv(run_dir / TRAIN_CSV))
+    assert t["episodes"] == 30 and t["transitions"] == transitions == agent.steps
+    assert t["gradient_steps"] == agent.gradient_steps == transitions - SMALL["learning_starts"] + 1
+    assert t["target_updates"] == agent.target_updates == agent.gradient_steps // SMALL["target_update"]
+    assert t["wall_s"] > 0 and t["transitions_per_second"] > 0
+    assert data["agent"] == "dueling_ddqn" and data["baseline"]["agent"] == "greedy"
+    paired = data["paired_vs_baseline"]
+    agent_t = [float(r["travel_time"]) for r in read_csv(run_dir / "episodes.csv")]
+    base_t = [float(r["travel_time"]) for r in read_csv(run_dir / "baseline_episodes.csv")]
+    assert paired["pairs"] == 12
+    assert paired["mean_difference"] == pytest.approx(np.mean(agent_t) - np.mean(base_t))
+    assert data["summary"]["mean_travel_time"] == pytest.approx(np.mean(agent_t))
+    assert data["config"] == CONFIG
+
+
+def test_tensorboard_has_the_curves_and_the_config(trained):
+    run_dir, _agent, _ = trained
+    acc = EventAccumulator(str(run_dir / "tensorboard"), size_guidance={"scalars": 0, "tensors": 0})
+    acc.Reload()
+    scalars = set(acc.Tags()["scalars"])
+    expected = {"charts/travel_time", "charts/episodic_return", "charts/epsilon",
+                "charts/transitions_per_second", "charts/switches", "losses/td_loss", "losses/q_values",
+                "eval/travel_time", "eval/baseline_travel_time", "eval/paired_difference"}  # fmt: skip
+    assert expected <= scalars
+    travel = acc.Scalars("charts/travel_time")
+    assert len(travel) == 30
+    rows = read_csv(run_dir / TRAIN_CSV)
+    assert [e.value for e in travel] == pytest.approx([float(r["travel_time"]) for r in rows])
+    steps = np.cumsum([len(r["choices"].split("-")) for r in rows])
+    assert [e.step for e in travel] == list(steps)
+    eps = [e.value for e in acc.Scalars("charts/epsilon")]
+    assert eps[0] > eps[-1] and eps[-1] == pytest.approx(0.1)
+    assert "config/text_summary" in acc.Tags()["tensors"]
+
+
+def test_a_rule_agent_is_only_evaluated(tmp_path):
+    run_dir = tmp_path / "rule"
+    agent = make_agent("random", 3, np.random.default_rng(1))
+    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baseline=greedy())
+    assert result.training["episodes"] == 0 and result.training["transitions"] == 0
+    assert not (run_dir / CHECKPOINTS).exists() and not (run_dir / TRAIN_CSV).exists()
+    assert result.paired is not None and result.paired["pairs"] == 12
+    same = train_and_evaluate(greedy(), toy_runners, settings(), tmp_path / "greedy", baseline=greedy())
+    assert same.paired["mean_difference"] == 0.0 and same.baseline is same.evaluation
+
+
+# ---------------------------------------------------------------------------------------- resume
+def _weights(agent) -> dict[str, torch.Tensor]:
+    return {**{f"online.{k}": v for k, v in agent.online.state_dict().items()},
+            **{f"target.{k}": v for k, v in agent.target.state_dict().items()}}  # fmt: skip
+
+
+def _without_wall(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+
+@pytest.mark.parametrize("stop_after", [5, 10, 17, 30])
+def test_an_interrupted_run_resumes_to_the_same_weights_and_results(trained, tmp_path, stop_after):
+    ref_dir, ref_agent, ref = trained
+    run_dir = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_and_evaluate(learner(), interrupted_after(stop_after), settings(), run_dir, baseline=greedy(),
+                           config=CONFIG)  # fmt: skip
+    done = (stop_after - 1) // 10 * 10  # the interrupted chunk never reached its checkpoint
+    if done == 0:  # no checkpoint yet: nothing to resume, a new run starts afresh
+        with pytest.raises(FileNotFoundError, match="no checkpoint"):
+            check_run_dir(run_dir, resume=True)
+        return
+    saved = load_checkpoint(run_dir / CHECKPOINTS)["trainer"]
+    assert saved["episodes_done"] == done
+    agent = learner(seed=99)  # a different initialisation: everything must come from the checkpoint
+    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baseline=greedy(), resume=True,
+                                config={**CONFIG, "resume": True, "progress": True})  # fmt: skip
+    mine, ref_w = _weights(agent), _weights(ref_agent)
+    assert mine.keys() == ref_w.keys() and all(torch.equal(mine[k], ref_w[k]) for k in mine)
+    assert agent.steps == ref_agent.steps and agent.gradient_steps == ref_agent.gradient_steps
+    assert _without_wall(read_csv(run_dir / TRAIN_CSV)) == _without_wall(read_csv(ref_dir / TRAIN_CSV))
+    assert _without_wall(read_csv(run_dir / "episodes.csv")) == _without_wall(
+        read_csv(ref_dir / "episodes.csv")
+    )
+    assert result.paired == ref.paired
+    assert result.training["sessions"] == 2 and result.training["episodes_done"] == 30
+
+
+def test_resume_with_other_settings_is_refused(trained, tmp_path):
+    run_dir = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_and_evaluate(learner(), interrupted_after(12), settings(), run_dir,
+                           config=CONFIG)  # fmt: skip
+    other = {**CONFIG, "learner": {"lr": 0.5}}
+    with pytest.raises(ValueError, match=r"learner\.lr: 0\.001 -> 0\.5"):
+        train_and_evaluate(learner(), toy_runners, settings(), run_dir, resume=True, config=other)
+
+
+def test_a_run_directory_is_never_reused_or_overwritten(trained, tmp_path):
+    run_dir, _, _ = trained
+    before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
+    with pytest.raises(FileExistsError, match="resume=true"):
+        train_and_evaluate(learner(), toy_runners, settings(), run_dir, config=CONFIG)
+    with pytest.raises(FileExistsError, match="complete"):
+        train_and_evaluate(learner(), toy_runners, settings(), run_dir, resume=True, config=CONFIG)
+    assert {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()} == before
+    with pytest.raises(FileNotFoundError, match="no checkpoint"):
+        train_and_evaluate(learner(), toy_runners, settings(), tmp_path / "empty", resume=True)
+
+
+def test_a_corrupted_checkpoint_is_reported_not_used(tmp_path):
+    run_dir = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_and_evaluate(learner(), interrupted_after(12), settings(), run_dir)
+    ckpt = next((run_dir / CHECKPOINTS).glob("*.pt"))
+    data = bytearray(ckpt.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    ckpt.write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match="corrupted"):
+        train_and_evaluate(learner(), toy_runners, settings(), run_dir, resume=True)
+    ckpt.write_bytes(bytes(data[: len(data) // 3]))
+    with pytest.raises(CheckpointError, match="truncated"):
+        train_and_evaluate(learner(), toy_runners, settings(), run_dir, resume=True)
+
+
+def test_a_checkpoint_of_another_observation_size_is_refused(trained, tmp_path):
+    run_dir, _, _ = trained
+    other = make_agent("dueling_ddqn", 4, np.random.default_rng(0), **SMALL)
+    with pytest.raises(CheckpointError, match="observations of size 9"):
+        other.load(run_dir)
+
+
+def test_the_bootstrap_of_the_comparison_is_seeded(trained):
+    _run_dir, _, result = trained
+    rows_a = result.evaluation.rows
+    rows_b = result.baseline.rows
+    again = paired_difference(rows_a, rows_b, bootstrap_rng(3), 500)
+    assert again == result.paired
+
+
+# ---------------------------------------------------------------------------------------- curves figure
+def plot_curves(*args: str) -> subprocess.CompletedProcess:
+    return run_script("plot_curves.py", *args, timeout=120)
+
+
+def test_plot_curves_overlays_runs_and_csv_files(trained, tmp_path):
+    run_dir, _, _ = trained
+    out = tmp_path / "curves.png"
+    proc = plot_curves(
+        str(run_dir), str(run_dir / "baseline_episodes.csv"), "--out", str(out), "--reference", "x=1"
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    again = plot_curves(str(run_dir), "--out", str(out))
+    assert again.returncode == 2 and "exists" in again.stderr
+    bad_calls = [
+        ([str(tmp_path)], "no train_episodes.csv"),
+        ([str(run_dir), "--label", "a", "--label", "b"], "2 --label for 1 runs"),
+        ([str(run_dir), "--reference", "150"], "LABEL=SECONDS"),
+    ]
+    for bad, needle in bad_calls:
+        proc = plot_curves(*bad, "--out", str(tmp_path / "other.png"))
+        assert proc.returncode == 2 and needle in proc.stderr, proc.stderr

@@ -1,0 +1,415 @@
+"""scripts/make_table.py, evcd.report.table and evcd.report.sweep on synthetic multirun directories
+(no SUMO; the statistics alone: tests/report/test_seed_stats.py).
+
+A helper writes what ``scripts/train.py -m`` leaves behind: ``multirun.yaml`` with the sweep's task
+overrides, one subdirectory per job with ``.hydra/overrides.yaml``, ``train.log``, ``results.json`` and,
+for learners, ``train_episodes.csv``. The numbers are chosen so that every mean, interval and share
+can be computed here by hand.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import math
+import statistics
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+import yaml
+
+from evcd.env.runners import EpisodeRow
+from evcd.loops.run_files import episodes_csv_text
+from evcd.report.sweep import IncompleteSweepError, ResultsError, collect, expand_sweep
+from evcd.report.table import BARS_PNG, CSV_COLUMNS, CSV_NAME, CURVES_PNG, MD_NAME, make_table
+from tests.conftest import run_script
+
+T_0975_4 = 2.7764451051977987  # Student t, 97.5% quantile, 4 degrees of freedom
+
+AGENTS = ("random", "greedy", "queue_aware", "hindsight", "dqn", "dueling_ddqn")
+LEARNERS = ("dqn", "dueling_ddqn")
+SEEDS = (0, 1, 2, 3, 4)
+EVS = (200, 300)
+#: (agent, evs) -> the mean of its seeds' evaluation means; seed s adds SPREAD[s] (+ NOISE for some).
+BASE = {
+    ("random", 200): 900.0, ("greedy", 200): 400.0, ("queue_aware", 200): 300.0,
+    ("hindsight", 200): 200.0, ("dqn", 200): 300.0, ("dueling_ddqn", 200): 250.0,
+    ("random", 300): 1300.0, ("greedy", 300): 500.0, ("queue_aware", 300): 480.0,
+    ("hindsight", 300): 500.0, ("dqn", 300): 520.0, ("dueling_ddqn", 300): 510.0,
+}  # fmt: skip
+SPREAD = (-10.0, -5.0, 0.0, 5.0, 10.0)
+#: per-seed noise added to some cells, so that their gap share has a real interval / no room
+NOISE = {
+    ("dueling_ddqn", 200): (12.0, -7.0, 3.0, -15.0, 7.0),
+    ("greedy", 300): (0.5, -0.3, 0.2, 0.1, -0.4),
+}
+
+
+def travel(agent: str, evs: int, seed: int) -> float:
+    """The synthetic evaluation mean travel time of a job."""
+    return BASE[agent, evs] + SPREAD[seed] + NOISE.get((agent, evs), (0.0,) * 5)[seed]
+
+
+def training_rows(n: int, start: float, end: float, seed: int) -> list[EpisodeRow]:
+    """``n`` training episodes whose travel time falls from ``start`` to ``end``; every 17th truncated."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        t = start + (end - start) * i / max(1, n - 1) + float(rng.normal(0, 30))
+        trunc = i % 17 == 5
+        row = EpisodeRow(episode=i, seed=1000 + i, departure=30000.0, origin="e1", day=0, choices="1-1",
+                         station=1, station_id="cs1", travel_time=7200.0 if trunc else t, queue_wait=10.0,
+                         reason="slots" if trunc else "charging", truncated=trunc, episode_return=-t / 3600,
+                         wall_s=0.1, switches=0)  # fmt: skip
+        rows.append(row)
+    return rows
+
+
+def results_json(agent: str, evs: int, seed: int, regime: str | None = "table", truncated: int = 0) -> dict:
+    """A results.json as scripts/train.py writes it (the fields make_table reads, and some others)."""
+    learns = agent in LEARNERS
+    config = {"evs": evs, "seed": seed, "agent": {"name": agent}, "train": {"days": [0], "episodes": 200},
+              "eval": {"days": [1], "episodes": 20}, "env": {"demand_seeds": [0]}}  # fmt: skip
+    if regime is not None:
+        config["regime"] = regime
+    mean = travel(agent, evs, seed)
+    out = {
+        "agent": agent,
+        "seed": seed,
+        "summary": {
+            "episodes": 20,
+            "completed": 20 - truncated,
+            "truncated": truncated,
+            "mean_travel_time": mean,
+            "median_travel_time": mean - 7.0,
+            "ci_low": mean - 30.0,
+            "ci_high": mean + 30.0,
+            "ci_level": 0.95,
+            "mean_queue_wait": 40.0 + seed,
+            "mean_return": -mean / 3600,
+            "mean_wall_s": 0.2,
+        },
+        "episodes": [],
+        "config": config,
+        "training": {
+            "episodes": 200 if learns else 0,
+            "episodes_done": 200 if learns else 0,
+            "wall_s": 100.0 + 10 * seed if learns else 0.0,
+            "day_build_s": 50.0 if learns else 0.0,
+            "truncated": 0,
+            "mean_travel_time": 600.0 + seed if learns else None,
+        },
+    }
+    if agent == "hindsight":
+        out["hindsight"] = {"best_station": [1] * 20}
+    return out
+
+
+def write_sweep(
+    root: Path,
+    agents: tuple[str, ...] = AGENTS,
+    evs: tuple[int, ...] = EVS,
+    seeds: tuple[int, ...] = SEEDS,
+    regime: str | None = "table",
+    experiment: str = "table",
+) -> Path:
+    """A multirun directory of ``experiment=... agent=... seed=... evs=...`` with every job finished."""
+    root.mkdir(parents=True)
+    task = [f"experiment={experiment}", f"agent={','.join(agents)}", f"seed={','.join(map(str, seeds))}",
+            f"evs={','.join(map(str, evs))}"]  # fmt: skip
+    (root / "multirun.yaml").write_text(yaml.safe_dump({
+        "hydra": {"mode": "MULTIRUN", "sweep": {"dir": str(root), "subdir": "${hydra.job.num}_..."},
+                  "overrides": {"hydra": ["hydra.mode=MULTIRUN"], "task": task}},
+        "evs": 400, "seed": 0,
+    }))  # fmt: skip
+    for num, (agent, seed, n) in enumerate(itertools.product(agents, seeds, evs)):
+        job = root / f"{num}_{agent}_evs{n}_seed{seed}"
+        (job / ".hydra").mkdir(parents=True)
+        overrides = [f"experiment={experiment}", f"agent={agent}", f"seed={seed}", f"evs={n}"]
+        (job / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump(overrides))
+        (job / ".hydra" / "config.yaml").write_text(yaml.safe_dump({"evs": n, "seed": seed}))
+        (job / "train.log").write_text(f"[2026-11-23 10:00:00,000][train][INFO] - {agent} evs={n}\n")
+        (job / "results.json").write_text(json.dumps(results_json(agent, n, seed, regime), indent=1))
+        if agent in LEARNERS:
+            rows = training_rows(200, 900.0, 350.0 if agent == "dqn" else 300.0, seed)
+            (job / "train_episodes.csv").write_text(episodes_csv_text(rows))
+    return root
+
+
+def job_dir(sweep: Path, agent: str, evs: int, seed: int) -> Path:
+    (found,) = sweep.glob(f"*_{agent}_evs{evs}_seed{seed}")
+    return found
+
+
+def table_row(markdown: str, first_header: str, first_cell: str) -> dict[str, str]:
+    """The row starting with ``first_cell`` of the first table whose header starts with ``first_header``."""
+    lines = markdown.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(f"| {first_header} |"))
+    header = [c.strip() for c in lines[start].strip("|").split("|")]
+    for line in lines[start + 2 :]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if cells[0] == first_cell:
+            return dict(zip(header, cells, strict=True))
+    raise AssertionError(f"no row {first_cell!r} under {first_header!r}")
+
+
+def hand_cell(values: list[float], quantile: float = T_0975_4) -> str:
+    mean = statistics.fmean(values)
+    half = quantile * statistics.stdev(values) / math.sqrt(len(values))
+    return f"{mean:.1f} [{mean - half:.1f}, {mean + half:.1f}] n={len(values)}"
+
+
+@pytest.fixture
+def sweep(tmp_path: Path) -> Path:
+    return write_sweep(tmp_path / "multirun")
+
+
+@pytest.fixture
+def run_table(tmp_path: Path) -> Callable[..., object]:
+    def run(*dirs: Path, **kwargs: object):
+        kwargs.setdefault("out_dir", tmp_path / "out")
+        kwargs.setdefault("resamples", 2000)
+        return make_table(list(dirs), **kwargs)
+
+    return run
+
+
+# ---------------------------------------------------------------------------------------- the sweep
+def test_expand_sweep_uses_hydras_parser():
+    combos = expand_sweep(["experiment=table", "agent=random,greedy", "seed=range(0,2)", "evs=200"])
+    assert combos == [
+        ("experiment=table", "agent=random", "seed=0", "evs=200"),
+        ("experiment=table", "agent=random", "seed=1", "evs=200"),
+        ("experiment=table", "agent=greedy", "seed=0", "evs=200"),
+        ("experiment=table", "agent=greedy", "seed=1", "evs=200"),
+    ]
+    assert expand_sweep(["train.days=[0,2]", "+tag='a,b'"]) == [("train.days=[0,2]", "+tag='a,b'")]
+    with pytest.raises(ResultsError, match="interval"):
+        expand_sweep(["learner.lr=interval(0.1,0.2)"])
+    with pytest.raises(ResultsError, match="parse"):
+        expand_sweep(["agent=dqn,"])
+
+
+def test_collect_reads_every_job(sweep):
+    c = collect([sweep])
+    assert len(c.jobs) == c.expected == len(AGENTS) * len(SEEDS) * len(EVS)
+    assert not c.gaps
+    assert [j.key for j in c.jobs] == sorted(j.key for j in c.jobs)
+    job = next(j for j in c.jobs if j.key == ("table", "dqn", 300, 2))
+    assert job.mean_travel_time == travel("dqn", 300, 2)
+    assert (job.train_episodes, job.train_wall_s, job.train_days, job.eval_days) == (200, 120.0, (0,), (1,))
+    rule = next(j for j in c.jobs if j.key == ("table", "greedy", 200, 0))
+    assert rule.train_episodes == 0 and math.isnan(rule.train_mean_travel_time)
+
+
+# ---------------------------------------------------------------------------------------- the outputs
+def test_csv_rows_and_order(sweep, run_table, tmp_path):
+    out = run_table(sweep)
+    with open(tmp_path / "out" / CSV_NAME, newline="") as f:
+        reader = csv.DictReader(f)
+        assert tuple(reader.fieldnames) == CSV_COLUMNS
+        rows = list(reader)
+    assert CSV_COLUMNS[:4] == ("regime", "agent", "evs", "seed") and CSV_COLUMNS[-1] == "job_dir"
+    order = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
+    expected = [(a, n, s) for a in order for n in EVS for s in SEEDS]
+    assert [(r["agent"], int(r["evs"]), int(r["seed"])) for r in rows] == expected
+    assert [(j.agent, j.evs, j.seed) for j in out.collection.jobs] == expected  # the table's order too
+    row = rows[expected.index(("dueling_ddqn", 200, 3))]
+    assert row["regime"] == "table"
+    assert float(row["mean_travel_time"]) == travel("dueling_ddqn", 200, 3)
+    assert float(row["median_travel_time"]) == travel("dueling_ddqn", 200, 3) - 7.0
+    assert (int(row["eval_episodes"]), int(row["completed"]), int(row["truncated"])) == (20, 20, 0)
+    assert (float(row["mean_queue_wait"]), int(row["train_episodes"])) == (43.0, 200)
+    assert (float(row["train_mean_travel_time"]), float(row["train_wall_s"]), float(row["day_build_s"])) == (
+        603.0, 130.0, 50.0)  # fmt: skip
+    assert (row["train_days"], row["eval_days"]) == ("[0]", "[1]")
+    assert Path(row["job_dir"]) == job_dir(sweep, "dueling_ddqn", 200, 3)
+    greedy = rows[expected.index(("greedy", 300, 0))]
+    assert greedy["train_mean_travel_time"] == "nan" and int(greedy["train_episodes"]) == 0
+
+
+def test_markdown_cells_match_a_hand_computation(sweep, run_table, tmp_path):
+    out = run_table(sweep)
+    md = (tmp_path / "out" / MD_NAME).read_text()
+    assert md == out.markdown
+    for evs in EVS:
+        row = table_row(md, "EVs", str(evs))
+        for agent in AGENTS:
+            assert row[agent] == hand_cell([travel(agent, evs, s) for s in SEEDS]), (agent, evs)
+    row = table_row(md, "EVs", "200")
+    assert row["greedy"] == "400.0 [390.2, 409.8] n=5"  # 2.776 * stdev 7.906 / sqrt(5) = 9.8
+    assert (row["paper random"], row["paper greedy"], row["paper DQN"], row["paper Dueling DDQN"]) == (
+        "942", "750", "545", "632")  # fmt: skip
+    assert table_row(md, "EVs", "300")["paper Dueling DDQN"] == "587"
+    assert "Jobs: 60 (6 agents, EV counts 200, 300, 5 seeds: 0, 1, 2, 3, 4); 20 evaluation episodes" in md
+    assert "200 training episodes per learner; training days [0], evaluation days [1]." in md
+
+
+def test_markdown_gap_shares(sweep, run_table):
+    md = run_table(sweep).markdown
+    gap_lines = md[md.index("### Share of the greedy") :]
+    row = table_row(gap_lines, "EVs", "200")
+    assert row["queue_aware"] == "0.50 [0.50, 0.50] n=5" and row["dqn"] == "0.50 [0.50, 0.50] n=5"
+    assert row["dueling_ddqn"].startswith("0.75 [")
+    assert row["greedy - hindsight (s)"] == "200.0 [200.0, 200.0] n=5"
+    row = table_row(gap_lines, "EVs", "300")
+    assert row["queue_aware"] == row["dqn"] == row["dueling_ddqn"] == "no room"
+
+
+def test_details_and_no_paper_table_without_paper_jobs(sweep, run_table):
+    md = run_table(sweep).markdown
+    details = md[md.index("### Per agent and EV count") :]
+    row = table_row(details, "agent", "dqn")
+    assert row == {"agent": "dqn", "EVs": "200", "seeds": "5", "truncated / episodes": "0 / 100",
+                   "mean queue wait (s)": "42.0", "training wall time (s)": "120"}  # fmt: skip
+    assert table_row(details, "agent", "greedy")["training wall time (s)"] == "—"
+    assert "The paper's way" not in md
+
+
+def test_several_dirs_a_paper_sweep_and_a_single_run(sweep, run_table, tmp_path):
+    paper = write_sweep(tmp_path / "paper", agents=("greedy", "dqn"), evs=(200,), seeds=(0, 1),
+                        regime="paper", experiment="paper")  # fmt: skip
+    single = tmp_path / "single"
+    (single / ".hydra").mkdir(parents=True)
+    (single / "results.json").write_text(json.dumps(results_json("random", 200, 0, regime=None)))
+    out = run_table(sweep, paper, single)
+    md = out.markdown
+    assert "## Regime `paper`" in md and "## Regime `table`" in md and "## Regime `unknown`" in md
+    part = md[md.index("### The paper's way") :]
+    row = table_row(part, "agent", "dqn")
+    assert row["training mean (s)"] == hand_cell([600.0, 601.0], quantile=12.7062047362)
+    assert row["evaluation mean (s)"] == hand_cell([travel("dqn", 200, s) for s in (0, 1)], 12.7062047362)
+    assert row["paper (s)"] == "545"
+    assert table_row(part, "agent", "greedy")["training mean (s)"] == "—"
+    unknown = md[md.index("## Regime `unknown`") :]
+    assert table_row(unknown, "EVs", "200")["random"] == f"{travel('random', 200, 0):.1f} n=1"
+    assert len(out.collection.jobs) == 60 + 4 + 1
+
+
+def test_failed_and_missing_jobs_stop_the_table(sweep, run_table, tmp_path):
+    failed = job_dir(sweep, "dqn", 300, 3)
+    (failed / "results.json").unlink()
+    (failed / "train.log").write_text(
+        "[2026-11-23 10:00:00,000][train][INFO] - training\n"
+        "Traceback (most recent call last):\n"
+        '  File "scripts/train.py", line 10, in main\n'
+        "    train(cfg)\n"
+        "RuntimeError: SUMO crashed at step 4711\n"
+        "[2026-11-23 10:00:02,000][train][INFO] - closing\n"
+    )  # fmt: skip
+    broken = job_dir(sweep, "greedy", 200, 1)
+    (broken / "results.json").write_text('{"agent": "greedy", "summ')
+    missing = job_dir(sweep, "hindsight", 200, 4)
+    for path in sorted(missing.rglob("*"), reverse=True):
+        path.unlink() if path.is_file() else path.rmdir()
+    missing.rmdir()
+    with pytest.raises(IncompleteSweepError) as info:
+        run_table(sweep)
+    msg = str(info.value)
+    assert "3 of 60 expected jobs" in msg
+    assert "failed: experiment=table agent=dqn seed=3 evs=300" in msg and str(failed) in msg
+    assert "RuntimeError: SUMO crashed at step 4711" in msg
+    assert "failed: experiment=table agent=greedy seed=1 evs=200" in msg and "unreadable" in msg
+    assert "missing: experiment=table agent=hindsight seed=4 evs=200" in msg
+    assert {g.status for g in info.value.gaps} == {"failed", "missing"}
+    assert isinstance(info.value, ValueError)
+    assert not (tmp_path / "out").exists()  # nothing written
+
+    out = run_table(sweep, allow_incomplete=True)
+    md = out.markdown
+    assert "## Missing or failed jobs (1 missing, 2 failed)" in md
+    assert "- missing: experiment=table agent=hindsight seed=4 evs=200" in md
+    assert "RuntimeError: SUMO crashed at step 4711" in md
+    assert len(out.collection.jobs) == 57
+    assert table_row(md, "EVs", "300")["dqn"] == hand_cell([travel("dqn", 300, s) for s in (0, 1, 2, 4)],
+                                                           quantile=3.1824463053)  # fmt: skip
+
+
+def test_an_error_line_of_the_log_names_a_failed_job(sweep):
+    failed = job_dir(sweep, "random", 200, 0)
+    (failed / "results.json").unlink()
+    with open(failed / "train.log", "a") as f:
+        f.write("[2026-11-23 10:00:01,000][train][ERROR] - evs=-1: must be an integer >= 0\n")
+    with pytest.raises(IncompleteSweepError, match="evs=-1: must be an integer >= 0"):
+        collect([sweep])
+
+
+def test_duplicate_jobs_and_non_run_directories_are_refused(sweep, tmp_path):
+    with pytest.raises(ResultsError, match="same \\(regime, agent, evs, seed\\)"):
+        collect([sweep, job_dir(sweep, "dqn", 200, 0)])
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ResultsError, match="neither a multirun directory"):
+        collect([tmp_path / "empty"])
+
+
+def test_refuses_to_overwrite(sweep, run_table, tmp_path):
+    run_table(sweep)
+    md = tmp_path / "out" / MD_NAME
+    md.write_text("edited by hand\n")
+    with pytest.raises(FileExistsError, match="refusing to overwrite"):
+        run_table(sweep)
+    assert md.read_text() == "edited by hand\n"
+    run_table(sweep, overwrite=True)
+    assert md.read_text().startswith("# Results over seeds")
+
+
+def test_default_output_is_the_first_directory(sweep):
+    out = make_table([sweep], resamples=200)
+    assert {p.name for p in out.paths} == {CSV_NAME, MD_NAME, BARS_PNG, CURVES_PNG}
+    assert all(p.parent == sweep for p in out.paths)
+
+
+def test_both_figures_are_written(sweep, run_table, tmp_path):
+    run_table(sweep)
+    for name in (BARS_PNG, CURVES_PNG):
+        path = tmp_path / "out" / name
+        assert path.stat().st_size > 20_000, name
+        image = matplotlib.image.imread(path)
+        assert image.shape[0] > 400 and image.shape[1] > 800 and image.std() > 0.05, name
+    assert not list((tmp_path / "out").glob(".*.tmp"))
+
+
+def test_no_learning_curves_without_learners(tmp_path, run_table, caplog):
+    rules = write_sweep(tmp_path / "rules", agents=("random", "greedy"), evs=(200,), seeds=(0, 1))
+    with caplog.at_level("INFO"):
+        out = run_table(rules)
+    assert (tmp_path / "out" / BARS_PNG).is_file() and not (tmp_path / "out" / CURVES_PNG).exists()
+    assert "not drawn" in caplog.text
+    assert "Needs greedy, hindsight" in out.markdown
+
+
+# ---------------------------------------------------------------------------------------- the script
+def make_table_script(*args: object) -> subprocess.CompletedProcess[str]:
+    return run_script("make_table.py", *map(str, args), "--resamples", "500", timeout=300)
+
+
+def test_script_exit_codes(tmp_path):
+    agents = ("greedy", "hindsight", "dqn")
+    sweep = write_sweep(tmp_path / "multirun", agents=agents, evs=(200,), seeds=(0, 1))
+    done = make_table_script(sweep, "--out", tmp_path / "out")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("# Results over seeds") and "| 200 |" in done.stdout
+    assert (tmp_path / "out" / MD_NAME).read_text() == done.stdout
+
+    again = make_table_script(sweep, "--out", tmp_path / "out")
+    assert again.returncode == 2 and "refusing to overwrite" in again.stderr
+
+    (job_dir(sweep, "dqn", 200, 1) / "results.json").unlink()
+    failed = make_table_script(sweep, "--out", tmp_path / "out2")
+    assert failed.returncode == 1
+    assert "failed: experiment=table agent=dqn seed=1 evs=200" in failed.stderr
+    assert "--allow-incomplete" in failed.stderr and not (tmp_path / "out2").exists()
+
+    partial = make_table_script(sweep, "--out", tmp_path / "out2", "--allow-incomplete")
+    assert partial.returncode == 0, partial.stderr
+    assert "- failed: experiment=table agent=dqn seed=1 evs=200" in partial.stdout
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "out2" / CSV_NAME).read_text())))
+    assert len(rows) == 5

@@ -1,0 +1,156 @@
+"""``scripts/evaluate.py`` end to end (real Hydra, real SUMO, grid scenario) and its configs."""
+
+from __future__ import annotations
+
+import csv
+import inspect
+import json
+import subprocess
+from dataclasses import asdict
+from pathlib import Path
+
+import pytest
+from hydra.errors import ConfigCompositionException
+from omegaconf import OmegaConf
+
+from evcd.cli.params import demand_config, env_kwargs
+from evcd.env import ChargingNavEnv
+from evcd.loops.hindsight import DISPATCHERS, make_dispatcher
+from evcd.loops.run_files import CSV_FIELDS
+from evcd.scenario.demand import DemandConfig
+from tests.conftest import CONF, compose_config, run_script
+
+#: Set by the scenario group, the top-level `evs` or derived: not in conf/env.
+NOT_IN_ENV_GROUP = {"self", "scenario", "evs", "charging_points", "demand"}
+
+
+def run_evaluate(*overrides: str) -> subprocess.CompletedProcess:
+    return run_script("evaluate.py", *overrides, timeout=600)
+
+
+def compose_evaluate(*overrides: str):
+    return compose_config("evaluate", *overrides)
+
+
+@pytest.fixture(scope="module")
+def scenario_dir(script_grid) -> Path:
+    return script_grid
+
+
+@pytest.fixture(scope="module")
+def small(script_overrides) -> list[str]:
+    """Overrides for a tiny, quick run on the grid."""
+    return list(script_overrides)
+
+
+# ---------------------------------------------------------------------------------------- configs
+def test_env_group_equals_the_env_defaults():
+    cfg = compose_evaluate()
+    params = inspect.signature(ChargingNavEnv.__init__).parameters
+    defaults = {k: p.default for k, p in params.items() if k not in NOT_IN_ENV_GROUP}
+    yaml = OmegaConf.to_container(cfg.env)
+    assert set(yaml) == set(defaults)
+    for key, default in defaults.items():
+        value = tuple(yaml[key]) if isinstance(default, tuple) else yaml[key]
+        assert value == default and type(value) is type(default), key
+
+
+def test_defaults_of_the_evaluate_config():
+    cfg = compose_evaluate()
+    assert (cfg.agent.name, cfg.evs, cfg.episodes, cfg.seed) == ("greedy", 400, 50, 0)
+    assert cfg.scenario.path == "sumo_net/jurong_west"
+    lib = asdict(DemandConfig())
+    assert asdict(demand_config(cfg)) == lib
+
+
+def test_every_agent_config_builds_its_agent(scenario_dir):
+    import numpy as np
+
+    env = ChargingNavEnv(**env_kwargs(compose_evaluate(f"scenario.path={scenario_dir}")))  # no SUMO yet
+    assert set(DISPATCHERS) == {p.stem for p in (CONF / "agent").glob("*.yaml")}
+    for name in DISPATCHERS:
+        params = OmegaConf.to_container(compose_evaluate(f"agent={name}").agent)
+        assert params.pop("name") == name
+        agent = make_dispatcher(name, env, np.random.default_rng(0), **params)
+        assert agent.name == name and agent.n_stations == 3
+
+
+def test_env_kwargs_resolve_paths_and_leave_demand_to_a_route_file(scenario_dir, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    kw = env_kwargs(compose_evaluate("scenario.path=grid", "env.cache_dir=cache", "evs=7"))
+    assert kw["scenario"] == str(tmp_path / "grid") and kw["cache_dir"] == str(tmp_path / "cache")
+    assert kw["evs"] == 7 and kw["demand"].evs == 7 and kw["departure_window"] == (0.0, 86400.0)
+    kw = env_kwargs(compose_evaluate("env.route_file=day.rou.xml"))
+    assert kw["route_file"] == str(tmp_path / "day.rou.xml") and "evs" not in kw and "demand" not in kw
+
+
+@pytest.mark.parametrize("override", ["no_such_option=3", "env.no_such_option=1", "agent.no_such_option=2"])
+def test_unknown_keys_are_rejected_by_hydra(override):
+    with pytest.raises(ConfigCompositionException, match="no_such_option"):
+        compose_evaluate(override)
+
+
+# ---------------------------------------------------------------------------------------- the script
+def test_evaluate_end_to_end(small, tmp_path):
+    out = tmp_path / "run"
+    proc = run_evaluate(*small, "agent=random", "episodes=2", "seed=4", f"hydra.run.dir={out}")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    with open(out / "episodes.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 2 and tuple(rows[0]) == CSV_FIELDS
+    data = json.loads((out / "results.json").read_text())
+    assert {"agent", "seed", "summary", "episodes", "config"} <= set(data)
+    assert data["agent"] == "random" and data["seed"] == 4 and data["config"]["episodes"] == 2
+    s = data["summary"]
+    assert {"mean_travel_time", "median_travel_time", "ci_low", "ci_high", "truncated", "mean_wall_s"} <= set(
+        s
+    )
+    assert s["episodes"] == 2 and s["completed"] + s["truncated"] == 2
+    for row in rows:  # random keeps its first choice
+        assert len(set(row["choices"].split("-"))) == 1
+    log = proc.stdout + proc.stderr
+    assert "mean travel time" in log and "95% CI" in log
+
+
+def test_a_sweep_writes_one_run_dir_per_job(small, tmp_path):
+    sweep = tmp_path / "sweep"
+    proc = run_evaluate("-m", *small, "agent=greedy,queue_aware", "episodes=1", f"hydra.sweep.dir={sweep}")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for job in ("0_greedy_evs30_seed0", "1_queue_aware_evs30_seed0"):
+        data = json.loads((sweep / job / "results.json").read_text())
+        assert data["agent"] == job.split("_", 1)[1].rsplit("_evs", 1)[0]
+        assert (sweep / job / "episodes.csv").is_file()
+
+
+@pytest.mark.parametrize(
+    "override,needle",
+    [
+        ("episodes=0", "episodes=0"),
+        ("agent.name=dqnn", "dqnn"),
+        ("evs=-1", "evs=-1"),
+        ("evs=1.5", "evs=1.5"),
+        ("env.protocol=slow", "protocol='slow'"),
+    ],
+)
+def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
+    out = tmp_path / "run"
+    proc = run_evaluate(*small, override, f"hydra.run.dir={out}")
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    log = proc.stdout + proc.stderr
+    assert needle in log
+    assert "simulating the day" not in log and not (out / "results.json").exists()
+
+
+def test_unknown_agent_group_lists_the_known_ones(tmp_path):
+    proc = run_evaluate("agent=dqnn", f"hydra.run.dir={tmp_path / 'run'}")
+    assert proc.returncode != 0
+    assert "agent/dqnn" in proc.stderr and "greedy" in proc.stderr and "random" in proc.stderr
+
+
+def test_an_existing_results_file_is_not_overwritten(small, tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "results.json").write_text("{}")
+    proc = run_evaluate(*small, "episodes=1", f"hydra.run.dir={out}")
+    assert proc.returncode == 2 and "results.json exists" in proc.stdout + proc.stderr
+    assert (out / "results.json").read_text() == "{}" and not (out / "episodes.csv").exists()

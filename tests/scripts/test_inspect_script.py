@@ -1,0 +1,84 @@
+"""The inspection command end to end: real Hydra, real SUMO, on a generated scenario folder."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from dataclasses import asdict
+from pathlib import Path
+
+import pytest
+
+from evcd.scenario.demand import DemandConfig
+from tests.conftest import ROOT, compose_config, run_script
+
+
+def run_inspect(*overrides: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return run_script("inspect_scenario.py", *overrides, cwd=cwd, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def scenario_dir(script_grid) -> Path:
+    return script_grid
+
+
+def test_yaml_demand_defaults_equal_the_library_defaults():
+    cfg = compose_config("inspect")
+    yaml = dict(cfg.scenario.demand)
+    lib = asdict(DemandConfig())
+    lib.pop("evs")
+    assert set(yaml) == set(lib)
+    for key, value in lib.items():
+        assert tuple(yaml[key]) == value if isinstance(value, tuple) else yaml[key] == value, key
+    assert cfg.evs == 400 and cfg.scenario.charging_points == 2
+
+
+def test_inspect_a_morning_on_a_small_scenario(scenario_dir, tmp_path):
+    out = tmp_path / "run"
+    proc = run_inspect(
+        f"scenario.path={scenario_dir}", "evs=120", "seed=3", "begin=25200", "end=32400",
+        "scenario.demand.cars_per_day=800", "scenario.demand.min_trip_m=500",
+        "scenario.demand.charging_share=0.6",
+        f"hydra.run.dir={out}",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["network"]["lefthand"] is True
+    assert len(report["stations"]) == 3
+    assert [h["hour"] for h in report["hourly"]] == [7, 8]
+    s = report["summary"]
+    assert s["departed"] > 0 and s["arrived"] > 0 and s["teleports"] == 0
+    served = sum(st["served"] for st in report["stations"])
+    assert served > 0
+    # every EV that got a point had arrived first; nobody charged twice
+    charges = report["charges"]
+    assert len({c["vehicle"] for c in charges}) == len(charges)
+    assert all(c["start_time"] >= c["arrival_time"] for c in charges if c["start_time"] is not None)
+    png = (out / "scenario_day.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+    assert (out / "routes.rou.xml.gz").stat().st_size > 0
+    log = proc.stdout + proc.stderr
+    assert "per station" in log and "station-to-station road distance" in log
+
+
+@pytest.mark.parametrize(
+    "override,needle",
+    [
+        ("evs=-1", "evs=-1"),
+        ("scenario.charging_points=0", "charging_points=0"),
+        ("begin=90000", "begin=90000"),
+        ("scenario.path=/no/such/folder", "/no/such/folder"),
+    ],
+)
+def test_bad_values_stop_before_sumo(scenario_dir, tmp_path, override, needle):
+    out = tmp_path / "run"
+    proc = run_inspect(f"scenario.path={scenario_dir}", override, f"hydra.run.dir={out}")
+    assert proc.returncode == 2
+    assert needle in proc.stdout + proc.stderr
+    assert not (out / "routes.rou.xml.gz").exists()  # nothing was generated or simulated
+
+
+def test_unknown_option_is_rejected_by_name(tmp_path):
+    proc = run_inspect("no_such_option=3", f"hydra.run.dir={tmp_path / 'run'}")
+    assert proc.returncode != 0
+    assert "no_such_option" in proc.stderr
