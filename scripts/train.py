@@ -35,6 +35,7 @@ from evcd.env.runners import check_engine, make_runner
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng
 from evcd.loops.train import TrainSettings, train_and_evaluate
+from evcd.loops.validation import ValidationSettings
 from evcd.utils.checkpoint import CheckpointError
 from evcd.utils.validation import check_int
 
@@ -43,14 +44,20 @@ log = logging.getLogger("train")
 
 def build(cfg: DictConfig) -> dict[str, Any]:
     """Everything the run needs, checked before any simulation starts."""
+    train_days, eval_days = config_days(cfg, "train.days"), config_days(cfg, "eval.days")
+    seed = check_int("seed", cfg.seed, minimum=0)
+    if bool(cfg.eval.day_per_seed):
+        eval_days = (eval_days[seed % len(eval_days)],)
     settings = TrainSettings(
         episodes=check_int("train.episodes", cfg.train.episodes, minimum=0),
         eval_episodes=check_int("eval.episodes", cfg.eval.episodes, minimum=1),
-        seed=check_int("seed", cfg.seed, minimum=0),
+        seed=seed,
         checkpoint_every=check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
         progress=bool(cfg.progress),
         log_window=check_int("train.log_window", cfg.train.log_window, minimum=1),
         resamples=check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
+        validation=ValidationSettings(cfg.train.validation.every, cfg.train.validation.episodes),
+        rotate_days=len(train_days) if bool(cfg.train.rotate_days) else 0,
     )
     check_int("torch_threads", cfg.torch_threads, minimum=1)
     engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
@@ -61,25 +68,39 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
                          "resume=true with its hydra.run.dir")  # fmt: skip
     params.pop("checkpoint", None)
-    train_days, eval_days = config_days(cfg, "train.days"), config_days(cfg, "eval.days")
     if tuple(cfg.env.demand_seeds) != train_days:
         raise ValueError(f"env.demand_seeds={list(cfg.env.demand_seeds)}: train.py sets it from "
                          f"train.days (and eval.days); set those instead")  # fmt: skip
+    base = env_kwargs(cfg)
     envs = {
-        "train": ChargingNavEnv(**{**env_kwargs(cfg), "demand_seeds": train_days}),
-        "eval": ChargingNavEnv(**{**env_kwargs(cfg), "demand_seeds": eval_days}),
+        "train": ChargingNavEnv(**{**base, "demand_seeds": train_days}),
+        "eval": ChargingNavEnv(**{**base, "demand_seeds": eval_days}),
     }  # validates every environment value; loads the scenario; no SUMO yet
     if set(train_days) & set(eval_days):
         log.warning("train.days and eval.days share %s: the evaluation is not on unseen traffic",
                     sorted(set(train_days) & set(eval_days)))  # fmt: skip
+    rules: dict[str, Any] = {}
+    if settings.validation.every and dispatcher_learns(name):
+        validation = cfg.train.validation
+        window = validation.departure_window
+        envs["validation"] = ChargingNavEnv(**{
+            **base, "demand_seeds": config_days(cfg, "train.validation.days"),
+            **({"departure_window": tuple(window)} if window is not None else {}),
+        })  # fmt: skip
+        shared = set(config_days(cfg, "train.validation.days")) & set(train_days + eval_days)
+        if shared:
+            raise ValueError(f"train.validation.days share {sorted(shared)} with train.days or eval.days: "
+                             "validate on tuning days")  # fmt: skip
+        rules = {str(r): make_dispatcher(str(r), envs["validation"], baseline_rng(seed))
+                 for r in validation.rules}  # fmt: skip
     agent = make_dispatcher(name, envs["train"], agent_rng(settings.seed), **params)
-    baseline = None
-    if cfg.eval.baseline is not None:
-        baseline = make_dispatcher(str(cfg.eval.baseline), envs["eval"], baseline_rng(settings.seed))
-        if baseline.learns:
-            raise ValueError(f"eval.baseline={cfg.eval.baseline!r}: must be a rule (random, greedy, "
-                             "queue_aware)")  # fmt: skip
-    return {"settings": settings, "agent": agent, "baseline": baseline, "envs": envs,
+    baselines = {}
+    for rule in cfg.eval.baselines:
+        baselines[str(rule)] = make_dispatcher(str(rule), envs["eval"], baseline_rng(settings.seed))
+        if baselines[str(rule)].learns:
+            raise ValueError(f"eval.baselines: {rule!r} is not a rule (random, greedy, queue_aware, "
+                             "hindsight)")  # fmt: skip
+    return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules,
             "runner": lambda phase: make_runner(envs[phase], engine, batch)}  # fmt: skip
 
 
@@ -92,16 +113,17 @@ def train(cfg: DictConfig) -> float:
     envs = parts["envs"]
     agent, settings = parts["agent"], parts["settings"]
     log.info("%r on %s, evs=%s, train days %s, eval days %s, seed %d -> %s", agent,
-             envs["train"].scenario.root, cfg.evs, list(cfg.train.days), list(cfg.eval.days),
-             settings.seed, out_dir)  # fmt: skip
+             envs["train"].scenario.root, cfg.evs, list(envs["train"].config.demand_seeds),
+             list(envs["eval"].config.demand_seeds), settings.seed, out_dir)  # fmt: skip
     result = train_and_evaluate(
         agent,
         parts["runner"],
         settings,
         out_dir,
-        baseline=parts["baseline"],
+        baselines=parts["baselines"],
         resume=bool(cfg.resume),
         config=OmegaConf.to_container(cfg, resolve=True),
+        validation_rules=parts["rules"],
     )
     for line in report_lines(result, cfg.evs):
         log.info("%s", line)
@@ -109,7 +131,7 @@ def train(cfg: DictConfig) -> float:
 
 
 def report_lines(result: Any, evs: int) -> list[str]:
-    """The run's outcome in a few sentences: training, evaluation, the paired comparison."""
+    """The run's outcome in a few sentences: training, evaluation, the paired comparisons, per day."""
     s, t = result.evaluation.summary, result.training
     lines = []
     if t["episodes"]:
@@ -123,15 +145,27 @@ def report_lines(result: Any, evs: int) -> list[str]:
         f"{s.mean_travel_time:.1f} s (95% CI {s.ci_low:.1f}-{s.ci_high:.1f}) over {s.completed} of "
         f"{s.episodes} evaluation episodes ({s.truncated} truncated)"
     )
-    p = result.paired
-    if p is not None and result.baseline is not None:
+    for name, p in result.paired.items():
         lines.append(
-            f"vs {result.baseline.agent} on the same {p['pairs']} episodes: {p['agent_mean']:.1f} s vs "
+            f"vs {name} on the same {p['pairs']} episodes: {p['agent_mean']:.1f} s vs "
             f"{p['baseline_mean']:.1f} s, difference {p['mean_difference']:+.1f} s (95% CI "
             f"{p['ci_low']:+.1f} to {p['ci_high']:+.1f}); faster in {p['agent_faster']}, equal in "
             f"{p['equal']}, slower in {p['agent_slower']}"
         )
+    runs = {result.evaluation.agent: result.evaluation.rows}
+    runs.update({name: base.rows for name, base in result.baselines.items()})
+    days = sorted({r.day for r in result.evaluation.rows})
+    if len(days) > 1:
+        for day in days:
+            means = ", ".join(f"{name} {_day_mean(rows, day):.1f} s" for name, rows in runs.items())
+            count = sum(r.day == day for r in result.evaluation.rows)
+            lines.append(f"evaluation day {day} ({count} episodes): {means}")
     return lines
+
+
+def _day_mean(rows: Any, day: int) -> float:
+    charged = [r.travel_time for r in rows if r.day == day and not r.truncated]
+    return sum(charged) / len(charged) if charged else float("nan")
 
 
 register_configs()

@@ -138,8 +138,9 @@ class Agent(ABC):
         return int(self.decide(np.asarray(obs)[None], [self.episode], explore)[0])
 
     # ------------------------------------------------------------------ learning
-    def observe(self, transition: Transition) -> None:  # noqa: B027  (a hook: no-op by default)
-        """Learning hook, called after every step while training; the rules ignore it."""
+    def observe(self, transition: Transition, episode: EpisodeState | None = None) -> None:  # noqa: B027
+        """Learning hook, called after every step of ``episode`` (default: the current one) while
+        training; the rules ignore it."""
 
     def stats(self) -> dict[str, float]:
         """Learning statistics for logs (cumulative counters and current schedules); none here."""

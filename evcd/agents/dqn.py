@@ -28,8 +28,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import logging
+from collections import deque
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +64,8 @@ class DQNEpisode(EpisodeState):
 
     drawn: bool = False
     random_station: int | None = None
+    #: n-step returns: this episode's transitions not stored yet (the last n - 1 at most)
+    pending: deque[Transition] = field(default_factory=deque)
 
 
 class DQNAgent(Agent):
@@ -221,22 +224,45 @@ class DQNAgent(Agent):
         return station if draw < self.epsilon else greedy
 
     # ------------------------------------------------------------------ learning
-    def observe(self, transition: Transition) -> None:
-        """Store the transition; every ``train_freq`` transitions after ``learning_starts``, learn."""
-        t = transition
-        self.replay.add(t.obs, int(t.action), float(t.reward) * self.config.reward_scale, t.next_obs,
-                        bool(t.terminated), bool(t.truncated))  # fmt: skip
-        self.steps += 1
+    def observe(self, transition: Transition, episode: DQNEpisode | None = None) -> None:
+        """Store the transition of ``episode`` (default: the current one); every ``train_freq``
+        transitions after ``learning_starts``, learn.
+
+        With ``n_step`` > 1 a transition is stored once the ``n - 1`` after it are known (or its
+        episode ended): its reward becomes the discounted sum of the (up to) ``n`` rewards, its
+        next observation the one ``n`` steps on, and its bootstrap is discounted by ``gamma ** n``.
+        """
         c = self.config
-        if self.steps >= max(c.learning_starts, 1) and self.steps % c.train_freq == 0:
+        if c.n_step == 1:
+            self._store((transition,))
+        else:
+            pending = (self.episode if episode is None else episode).pending
+            pending.append(transition)
+            if len(pending) == c.n_step:
+                self._store(pending)
+                pending.popleft()
+            if transition.terminated or transition.truncated:  # the episode ended: store what is left
+                while pending:
+                    self._store(pending)
+                    pending.popleft()
+        self.steps += 1
+        if self.steps >= max(c.learning_starts, 1) and self.steps % c.train_freq == 0 and len(self.replay):
             for _ in range(c.gradient_steps):
                 self.learn()
 
+    def _store(self, window: Sequence[Transition]) -> None:
+        """Store the first transition of ``window`` with the rewards of the whole window."""
+        gamma, first, last = self.config.gamma, window[0], window[-1]
+        reward = sum(gamma**k * float(t.reward) for k, t in enumerate(window)) * self.config.reward_scale
+        self.replay.add(first.obs, int(first.action), reward, last.next_obs, bool(last.terminated),
+                        bool(last.truncated), discount=gamma ** len(window))  # fmt: skip
+
     def td_targets(
-        self, rewards: torch.Tensor, next_obs: torch.Tensor, terminated: torch.Tensor
+        self, rewards: torch.Tensor, next_obs: torch.Tensor, terminated: torch.Tensor, discounts: torch.Tensor
     ) -> torch.Tensor:
-        """``r + gamma * (1 - terminated) * Q_target(s', a*)``: ``a*`` from the online network if
-        ``double``, else from the target network itself (the max)."""
+        """``r + discount * (1 - terminated) * Q_target(s', a*)`` (``discount``: ``gamma ** n`` for a
+        transition of ``n`` rewards): ``a*`` from the online network if ``double``, else from the
+        target network itself (the max)."""
         with torch.no_grad():
             next_target = self.target(next_obs)
             if self.double:
@@ -244,7 +270,7 @@ class DQNAgent(Agent):
                 next_value = next_target.gather(1, best).squeeze(1)
             else:
                 next_value = next_target.max(dim=1).values
-            return rewards + self.config.gamma * (1.0 - terminated) * next_value
+            return rewards + discounts * (1.0 - terminated) * next_value
 
     def learn(self) -> float:
         """One gradient step on a prioritized batch; returns the loss."""
@@ -256,7 +282,8 @@ class DQNAgent(Agent):
         rewards = torch.from_numpy(batch.rewards.astype(np.float32))
         terminated = torch.from_numpy(batch.terminated.astype(np.float32))
         weights = torch.from_numpy(batch.weights.astype(np.float32))
-        target = self.td_targets(rewards, next_obs, terminated)
+        discounts = torch.from_numpy(batch.discounts.astype(np.float32))
+        target = self.td_targets(rewards, next_obs, terminated, discounts)
         q = self.online(obs).gather(1, actions[:, None]).squeeze(1)
         if c.loss == "mse":
             per_sample = F.mse_loss(q, target, reduction="none")

@@ -27,6 +27,7 @@ class DQNConfig:
         batch_size: transitions per gradient step.
         buffer_size: replay capacity (transitions).
         gamma: discount per decision slot.
+        n_step: rewards summed per stored transition (n-step returns; 1: one-step Q-learning).
         learning_starts: transitions stored before the first gradient step.
         train_freq: a round of learning every this many transitions.
         gradient_steps: gradient steps per round.
@@ -53,6 +54,7 @@ class DQNConfig:
     batch_size: int = 32
     buffer_size: int = 10_000
     gamma: float = 0.99
+    n_step: int = 1
     learning_starts: int = 100
     train_freq: int = 1
     gradient_steps: int = 1
@@ -72,7 +74,7 @@ class DQNConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", check_hidden(self.hidden))
-        for key in ("batch_size", "buffer_size", "train_freq", "gradient_steps", "target_update"):
+        for key in ("batch_size", "buffer_size", "train_freq", "gradient_steps", "target_update", "n_step"):
             check_int(key, getattr(self, key), minimum=1)
         for key in ("learning_starts", "exploration_steps", "beta_steps"):
             check_int(key, getattr(self, key), minimum=0)

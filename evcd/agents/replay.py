@@ -1,7 +1,7 @@
 """Prioritized experience replay (Schaul et al. 2016, proportional variant), numpy only.
 
     buffer = PrioritizedReplayBuffer(capacity=10_000, obs_dim=15, alpha=0.6)
-    slot = buffer.add(obs, action, reward, next_obs, terminated, truncated)
+    slot = buffer.add(obs, action, reward, next_obs, terminated, truncated, discount=0.99)
     batch = buffer.sample(32, rng, beta=0.4)          # batch.weights scale each TD loss term
     buffer.update_priorities(batch.indices, td_errors)
 
@@ -176,6 +176,7 @@ class Batch(NamedTuple):
     next_obs: np.ndarray  # (B, obs_dim) float32
     terminated: np.ndarray  # (B,) bool: charge start, no bootstrap
     truncated: np.ndarray  # (B,) bool: time-limit end, still bootstraps
+    discounts: np.ndarray  # (B,) float32 what the value of next_obs is worth (gamma ** steps)
     weights: np.ndarray  # (B,) float32 importance-sampling weights, max 1
     indices: np.ndarray  # (B,) int64 buffer slots, for update_priorities
     probabilities: np.ndarray  # (B,) float64 P(i) each transition was drawn with
@@ -204,8 +205,9 @@ def _weights(p: np.ndarray, beta: float) -> np.ndarray:
 
 
 #: What :meth:`PrioritizedReplayBuffer.state_dict` holds.
-_STATE_KEYS = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated", "priorities",
-               "position", "size", "max_priority", "alpha", "eps", "capacity", "obs_dim")  # fmt: skip
+_STATE_KEYS = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated", "discounts",
+               "priorities", "position", "size", "max_priority", "alpha", "eps", "capacity",
+               "obs_dim")  # fmt: skip
 
 
 class PrioritizedReplayBuffer:
@@ -228,6 +230,7 @@ class PrioritizedReplayBuffer:
         self._rewards = np.zeros(capacity, dtype=np.float32)
         self._terminated = np.zeros(capacity, dtype=bool)
         self._truncated = np.zeros(capacity, dtype=bool)
+        self._discounts = np.zeros(capacity, dtype=np.float32)
         self._tree = SumTree(capacity)
         self._position = 0  # the slot the next transition goes to
         self._size = 0
@@ -237,22 +240,35 @@ class PrioritizedReplayBuffer:
         return self._size
 
     def add(
-        self, obs: Any, action: int, reward: float, next_obs: Any, terminated: bool, truncated: bool
+        self,
+        obs: Any,
+        action: int,
+        reward: float,
+        next_obs: Any,
+        terminated: bool,
+        truncated: bool,
+        discount: float = 1.0,
     ) -> int:
         """Store a transition over the oldest one once full; returns its slot.
 
+        ``discount`` is what the value of ``next_obs`` is worth to this transition (``gamma`` for a
+        one-step transition, ``gamma ** k`` for one that sums ``k`` rewards); ``terminated`` still
+        cuts the bootstrap whatever it is.
+
         Raises:
-            ValueError: an observation not of shape ``(obs_dim,)``, a negative action or a non-finite
-                reward.
+            ValueError: an observation not of shape ``(obs_dim,)``, a negative action, a non-finite
+                reward or a discount outside ``[0, 1]``.
         """
         o, o2 = self._check_obs("obs", obs), self._check_obs("next_obs", next_obs)
         a, r = operator.index(action), float(reward)
         require(a >= 0, f"action {a}: must be >= 0")
         require(math.isfinite(r), f"reward {r!r}: must be finite")
+        check_real("discount", discount, low=0.0, high=1.0)
         slot = self._position
         self._obs[slot], self._next_obs[slot] = o, o2
         self._actions[slot], self._rewards[slot] = a, r
         self._terminated[slot], self._truncated[slot] = bool(terminated), bool(truncated)
+        self._discounts[slot] = discount
         self._tree._write(np.array([slot], dtype=np.int64), np.array([self._max_priority]))
         self._position = (slot + 1) % self.capacity
         self._size = min(self._size + 1, self.capacity)
@@ -276,7 +292,8 @@ class PrioritizedReplayBuffer:
         probs = tree._tree[idx + tree._leaf0] / total
         return Batch(
             self._obs[idx], self._actions[idx], self._rewards[idx], self._next_obs[idx],
-            self._terminated[idx], self._truncated[idx], _weights(probs, beta), idx, probs,
+            self._terminated[idx], self._truncated[idx], self._discounts[idx], _weights(probs, beta), idx,
+            probs,
         )  # fmt: skip
 
     def update_priorities(self, indices: np.ndarray, td_errors: np.ndarray) -> None:
@@ -315,7 +332,7 @@ class PrioritizedReplayBuffer:
         return {
             "obs": self._obs.copy(), "next_obs": self._next_obs.copy(), "actions": self._actions.copy(),
             "rewards": self._rewards.copy(), "terminated": self._terminated.copy(),
-            "truncated": self._truncated.copy(),
+            "truncated": self._truncated.copy(), "discounts": self._discounts.copy(),
             "priorities": self._tree.get(np.arange(self.capacity)),
             "position": self._position, "size": self._size, "max_priority": self._max_priority,
             "alpha": self.alpha, "eps": self.eps, "capacity": self.capacity, "obs_dim": self.obs_dim,
@@ -338,7 +355,8 @@ class PrioritizedReplayBuffer:
         for key, dtype, shape in (
             ("obs", np.float32, (cap, dim)), ("next_obs", np.float32, (cap, dim)),
             ("actions", np.int64, (cap,)), ("rewards", np.float32, (cap,)), ("terminated", bool, (cap,)),
-            ("truncated", bool, (cap,)), ("priorities", np.float64, (cap,)),
+            ("truncated", bool, (cap,)), ("discounts", np.float32, (cap,)),
+            ("priorities", np.float64, (cap,)),
         ):  # fmt: skip
             arr = np.asarray(state[key]).astype(dtype)
             require(arr.shape == shape, f"replay state {key!r} has shape {arr.shape}, expected {shape}")
@@ -353,7 +371,7 @@ class PrioritizedReplayBuffer:
         require(0.0 < max_priority < math.inf, f"replay state max_priority {max_priority!r}: must be > 0")
         require(not arrays["priorities"][size:].any(), "replay state has priorities on slots never filled")
         self._tree.set_all(arrays["priorities"])  # validates the priorities before anything else changes
-        for key in ("obs", "next_obs", "actions", "rewards", "terminated", "truncated"):
+        for key in ("obs", "next_obs", "actions", "rewards", "terminated", "truncated", "discounts"):
             getattr(self, f"_{key}")[...] = arrays[key]
         self._size, self._position, self._max_priority = size, position, max_priority
         self.alpha, self.eps = alpha, eps

@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
+from evcd.loops.validation import ValidationRecord
 from evcd.utils.atomic import atomic_write_png
 
 
@@ -31,8 +32,10 @@ def plot_learning_curve(
     window: int = 50,
     references: Mapping[str, float] | None = None,
     title: str = "",
+    validation: ValidationRecord | None = None,
 ) -> Path:
-    """Save a PNG of travel time per training episode (top) and station switches (bottom).
+    """Save a PNG of travel time per training episode (top), the periodic held-out validation if
+    there is one (middle), and station switches (bottom).
 
     Args:
         runs: label -> the run's training rows (:class:`~evcd.env.runners.base.EpisodeRow`) in the order
@@ -42,9 +45,16 @@ def plot_learning_curve(
         window: episodes in the rolling mean drawn over the per-episode points.
         references: label -> a travel time drawn as a horizontal line (e.g. a rule's mean).
         title: figure title.
+        validation: the run's validations (:mod:`evcd.loops.validation`): the policy's mean travel
+            time on the same held-out episodes after each block of training, beside the rules'.
     """
-    fig = Figure(figsize=(11, 7))
-    ax_t, ax_s = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1.2])
+    validated = validation is not None and bool(validation.points)
+    fig = Figure(figsize=(11, 9.5 if validated else 7))
+    if validated:
+        ax_t, ax_v, ax_s = fig.subplots(3, 1, sharex=True, height_ratios=[3, 2, 1.2])
+        _plot_validation(ax_v, validation)  # type: ignore[arg-type]
+    else:
+        ax_t, ax_s = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1.2])
     colors = colormaps["tab10"](np.arange(max(1, len(runs))) % 10)
     for (label, rows), c in zip(runs.items(), colors, strict=False):
         ep = np.arange(len(rows))  # the order played, not the episode index
@@ -70,3 +80,18 @@ def plot_learning_curve(
         ax_t.set_title(title)
     fig.tight_layout()
     return atomic_write_png(fig, path)
+
+
+def _plot_validation(ax: Any, validation: ValidationRecord) -> None:
+    """The validation curve: the policy's mean after each block of training, the rules as lines."""
+    points = validation.points
+    x = [p.episodes_done for p in points]
+    n = len(points[0].travel_times)
+    ax.plot(x, [p.mean for p in points], marker="o", color="C3", lw=2, label="policy, no exploration")
+    for (name, mean), ls in zip(validation.to_dict()["rule_means"].items(), ("--", ":", "-."), strict=False):
+        if mean is not None:
+            ax.axhline(mean, color="k", ls=ls, lw=1.2, label=f"{name}: {mean:.0f} s")
+    ax.set_ylabel(f"mean travel time (s)\non {n} held-out episodes")
+    ax.set_title("held-out validation: the same episodes after every block of training", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")

@@ -2,9 +2,10 @@
 :mod:`evcd.report`).
 
 A run directory (``scripts/train.py``) holds ``train_episodes.csv``, ``episodes.csv``,
-``baseline_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/`` and
-``tensorboard/``; ``scripts/evaluate.py`` writes ``episodes.csv`` and ``results.json``. Every file is
-written atomically; none already there is overwritten unless asked.
+``baseline_<rule>_episodes.csv`` (each baseline rule on the same episodes), ``results.json``,
+``learning_curve.png``, ``checkpoints/`` and ``tensorboard/``; ``scripts/evaluate.py`` writes
+``episodes.csv`` and ``results.json``. Every file is written atomically; none already there is
+overwritten unless asked.
 """
 
 from __future__ import annotations
@@ -24,11 +25,16 @@ CHECKPOINTS = "checkpoints"
 TENSORBOARD = "tensorboard"
 TRAIN_CSV = "train_episodes.csv"
 EVAL_CSV = "episodes.csv"
-BASELINE_CSV = "baseline_episodes.csv"
 RESULTS_JSON = "results.json"
 CURVE_PNG = "learning_curve.png"
-#: The files of a finished run (a new run refuses a directory that holds one of them).
-OUTPUTS = (TRAIN_CSV, EVAL_CSV, BASELINE_CSV, RESULTS_JSON, CURVE_PNG)
+#: The files of a finished run (a new run refuses a directory that holds one of them), as glob patterns.
+OUTPUTS = (TRAIN_CSV, EVAL_CSV, "baseline_*_episodes.csv", RESULTS_JSON, CURVE_PNG)
+
+
+def baseline_csv(rule: str) -> str:
+    """The episodes file of the baseline rule ``rule`` (evaluated on the run's evaluation episodes)."""
+    return f"baseline_{rule}_episodes.csv"
+
 
 CSV_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(EpisodeRow))
 

@@ -6,7 +6,8 @@ Through ``numpy.random.SeedSequence`` spawn keys, an episode depends only on ``(
   the generator of the agent's episode (see :func:`episode_spec`);
 - the bootstrap: ``spawn_key=(1,)``; the agent's own generator (network initialisation, replay
   sampling): ``spawn_key=(2,)``, the baseline rule's ``(2, 1)``; training episodes: ``spawn_key=(3, i)``,
-  a stream disjoint from the evaluation episodes'.
+  a stream disjoint from the evaluation episodes'; the periodic validation's episodes:
+  ``spawn_key=(4, i)``.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ EVAL_STREAM = 0
 BOOTSTRAP_STREAM = 1
 AGENT_STREAM = 2
 TRAIN_STREAM = 3
+VALIDATION_STREAM = 4
 
 
 def episode_spec(seed: int, episode: int, stream: int = EVAL_STREAM) -> EpisodeSpec:

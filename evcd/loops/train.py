@@ -1,7 +1,7 @@
-"""Train an agent on training episodes, then evaluate it beside a baseline on held-out episodes.
+"""Train an agent on training episodes, then evaluate it beside baseline rules on held-out episodes.
 
     result = train_and_evaluate(agent, runners, TrainSettings(episodes=500, eval_episodes=50, seed=0),
-                                run_dir, baseline=greedy_agent)
+                                run_dir, baselines={"greedy": greedy_agent})
 
 ``runners(phase)`` makes the :class:`~evcd.env.runners.base.EpisodeRunner` of a phase, ``"train"`` or
 ``"eval"`` (libsumo runs one simulation per process, so the two are made one after the other, each
@@ -19,11 +19,11 @@ evaluation measures the policy on traffic it never trained on.
    uninterrupted one.
 2. **Evaluation**: the agent, without exploration, on the evaluation episodes (stream
    :data:`~evcd.loops.seeds.EVAL_STREAM`, the same episodes ``scripts/evaluate.py`` runs for that
-   seed), then the baseline (greedy) on the same episodes, and their paired difference with a
-   bootstrap interval.
+   seed), then each baseline rule (greedy, queue_aware) on the same episodes, and the paired
+   difference with each, with a bootstrap interval.
 
 Files in ``run_dir``: ``train_episodes.csv``, ``episodes.csv`` (the agent's evaluation),
-``baseline_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/``,
+``baseline_<rule>_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/``,
 ``tensorboard/``. Nothing already there is overwritten: a run directory that holds a checkpoint
 is only entered again with ``resume=True``.
 """
@@ -42,18 +42,18 @@ from typing import Any
 import numpy as np
 
 from evcd.agents.base import Agent
-from evcd.env.runners.base import EpisodeRow, EpisodeRunner
+from evcd.env.runners.base import EpisodeRow, EpisodeRunner, EpisodeSpec
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
 from evcd.loops.progress import EpisodeProgress
 from evcd.loops.run_files import (
-    BASELINE_CSV,
     CHECKPOINTS,
     CURVE_PNG,
     EVAL_CSV,
     RESULTS_JSON,
     TENSORBOARD,
     TRAIN_CSV,
+    baseline_csv,
     episodes_csv_text,
     results_dict,
 )
@@ -61,6 +61,7 @@ from evcd.loops.seeds import TRAIN_STREAM, bootstrap_rng, episode_specs
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult, paired_difference
 from evcd.loops.train_log import TrainLog
 from evcd.loops.train_state import TrainState, check_run_dir, restore_training, save_training
+from evcd.loops.validation import ValidationSettings, Validator
 from evcd.utils.atomic import atomic_write_json, atomic_write_text
 from evcd.utils.checkpoint import has_checkpoint
 from evcd.utils.validation import check_int
@@ -82,6 +83,10 @@ class TrainSettings:
         progress: show progress bars.
         log_window: the training bar shows the mean travel time of this many latest episodes.
         resamples: bootstrap resamples of the intervals.
+        validation: the periodic held-out evaluation during training (:mod:`evcd.loops.validation`).
+        rotate_days: with this many training days (> 1), each call of ``checkpoint_every`` episodes
+            plays on one of them, in turn (the episodes' ``day`` reset option); 0 or 1: each episode
+            draws its day from its seed.
     """
 
     episodes: int
@@ -91,11 +96,19 @@ class TrainSettings:
     progress: bool = True
     log_window: int = 50
     resamples: int = BOOTSTRAP_RESAMPLES
+    validation: ValidationSettings = dataclasses.field(default_factory=ValidationSettings)
+    rotate_days: int = 0
 
     def __post_init__(self) -> None:
         for key, low in (("episodes", 0), ("eval_episodes", 1), ("seed", 0), ("checkpoint_every", 0),
-                         ("log_window", 1), ("resamples", 1)):  # fmt: skip
+                         ("log_window", 1), ("resamples", 1), ("rotate_days", 0)):  # fmt: skip
             check_int(key, getattr(self, key), minimum=low)
+        every = self.validation.every
+        if every and self.checkpoint_every and every % self.checkpoint_every:
+            raise ValueError(
+                f"train.validation.every={every}: must be a multiple of train.checkpoint_every="
+                f"{self.checkpoint_every} (training episodes are played in calls of that many)"
+            )
 
 
 @dataclass(frozen=True)
@@ -103,9 +116,19 @@ class TrainResult:
     """What :func:`train_and_evaluate` measured (also written to ``results.json``)."""
 
     evaluation: EvalResult
-    baseline: EvalResult | None
-    paired: dict[str, Any] | None
+    baselines: dict[str, EvalResult]
+    paired: dict[str, dict[str, Any]]  # rule -> the agent's paired difference with it
     training: dict[str, Any]
+
+
+def training_specs(settings: TrainSettings) -> list[EpisodeSpec]:
+    """The run's training episodes: stream :data:`TRAIN_STREAM` of its seed, each call of
+    ``checkpoint_every`` episodes on one training day in turn when ``rotate_days`` > 1."""
+    specs = episode_specs(settings.seed, range(settings.episodes), TRAIN_STREAM)
+    if settings.rotate_days <= 1:
+        return specs
+    every = settings.checkpoint_every or settings.episodes
+    return [dataclasses.replace(s, options={"day": (s.index // every) % settings.rotate_days}) for s in specs]
 
 
 def _train(
@@ -116,10 +139,11 @@ def _train(
     state: TrainState,
     config: Mapping[str, Any] | None,
     tlog: TrainLog,
+    validator: Validator | None,
 ) -> None:
-    """Play the training episodes from ``state.episodes_done`` on, with checkpoints."""
+    """Play the training episodes from ``state.episodes_done`` on, with checkpoints (and validations)."""
     every = settings.checkpoint_every or settings.episodes
-    specs = episode_specs(settings.seed, range(settings.episodes), TRAIN_STREAM)
+    specs = training_specs(settings)
     bar = EpisodeProgress(settings.episodes, f"train {agent.name}", settings.progress,
                           initial=state.episodes_done, window=settings.log_window)  # fmt: skip
     bar.travel = [r.travel_time for r in state.rows if not r.truncated]
@@ -131,13 +155,14 @@ def _train(
         t0 = time.perf_counter()
         runner.prepare()
         state.prepare_s += time.perf_counter() - t0
-        session_start, wall_before = time.perf_counter(), state.wall_s
+        session_start, wall_before, validation_before = time.perf_counter(), state.wall_s, state.validation_s
 
         def on_episode(row: EpisodeRow) -> None:
             state.rows.append(row)
             state.episodes_done += 1
             state.transitions += row.steps
-            state.wall_s = wall_before + time.perf_counter() - session_start
+            paused = state.validation_s - validation_before
+            state.wall_s = wall_before + time.perf_counter() - session_start - paused
             tlog.episode(row, agent.stats(), state.transitions, state.wall_s)
             bar(row)
 
@@ -145,6 +170,12 @@ def _train(
             start = state.episodes_done
             stop = min(settings.episodes, (start // every + 1) * every)
             runner.run(specs[start:stop], agent, explore=True, learn=True, on_episode=on_episode)
+            if validator is not None and validator.due(state.episodes_done, settings.episodes):
+                runner.close()  # one simulation per process: the next call starts its own again
+                t1 = time.perf_counter()
+                validator.validate(agent, state.episodes_done, state.transitions, state.validation)
+                state.validation_s += time.perf_counter() - t1
+                tlog.validation(state.validation, state.transitions)
             tlog.flush()
             save_training(run_dir, agent, state, config)
             saved = state.episodes_done
@@ -164,22 +195,25 @@ def train_and_evaluate(
     runners: RunnerFactory,
     settings: TrainSettings,
     run_dir: str | Path,
-    baseline: Dispatcher | None = None,
+    baselines: Mapping[str, Dispatcher] | None = None,
     resume: bool = False,
     config: Mapping[str, Any] | None = None,
+    validation_rules: Mapping[str, Agent] | None = None,
 ) -> TrainResult:
-    """Train ``agent`` (if it learns), evaluate it and ``baseline`` on the same held-out episodes.
+    """Train ``agent`` (if it learns), evaluate it and the ``baselines`` on the same held-out episodes.
 
     Args:
         agent: the agent (a learner is trained first; a rule, or the hindsight bound, is only evaluated).
         runners: ``runners("train")`` / ``runners("eval")`` make each phase's runner.
         settings: episodes, seed, checkpoints.
         run_dir: where every file goes (see the module docstring).
-        baseline: the rule the agent is compared with on the same episodes (``None``: no comparison;
-            an agent of the baseline's name is its own baseline).
+        baselines: the rules the agent is compared with on the same episodes, by name (an agent of a
+            rule's name is its own baseline).
         resume: continue the run whose checkpoint is in ``run_dir``.
         config: the run's resolved settings (plain values): stored with checkpoints and results, and
             compared on resume.
+        validation_rules: the rules validated on the periodic validation's episodes beside the agent
+            (``settings.validation``; ``runners("validation")`` makes its runner).
 
     Raises:
         FileExistsError, FileNotFoundError: see :func:`check_run_dir`.
@@ -200,37 +234,37 @@ def train_and_evaluate(
         if not resume:
             tlog.config(config or {}, repr(agent))
         if episodes and state.episodes_done < episodes:
-            _train(
-                agent, runners, dataclasses.replace(settings, episodes=episodes), run_dir, state, config, tlog
-            )
-        evaluation, base = _evaluate(agent, runners, settings, baseline)
-        paired = None
-        if base is not None:
-            paired = paired_difference(
-                evaluation.rows, base.rows, bootstrap_rng(settings.seed), settings.resamples
-            )
+            validator = None
+            if settings.validation.every:
+                validator = Validator(runners, settings.validation, settings.seed, validation_rules or {})
+            _train(agent, runners, dataclasses.replace(settings, episodes=episodes), run_dir, state, config,
+                   tlog, validator)  # fmt: skip
+        evaluation, bases = _evaluate(agent, runners, settings, baselines or {})
+        paired = {name: paired_difference(evaluation.rows, base.rows, bootstrap_rng(settings.seed),
+                                          settings.resamples) for name, base in bases.items()}  # fmt: skip
         training = _training_summary(agent, state, episodes)
-        tlog.evaluation(evaluation, base, paired, state.transitions)
+        tlog.evaluation(evaluation, bases, paired, state.transitions)
     finally:
         tlog.close()
-    result = TrainResult(evaluation, base, paired, training)
+    result = TrainResult(evaluation, bases, paired, training)
     _write_outputs(run_dir, result, state, config)
     return result
 
 
 def _evaluate(
-    agent: Dispatcher, runners: RunnerFactory, settings: TrainSettings, baseline: Dispatcher | None
-) -> tuple[EvalResult, EvalResult | None]:
+    agent: Dispatcher, runners: RunnerFactory, settings: TrainSettings, baselines: Mapping[str, Dispatcher]
+) -> tuple[EvalResult, dict[str, EvalResult]]:
     runner = runners("eval")
     try:
         runner.prepare()
         kwargs = {"progress": settings.progress, "resamples": settings.resamples}
         evaluation = evaluate(runner, agent, settings.eval_episodes, settings.seed, **kwargs)
-        if baseline is None:
-            return evaluation, None
-        if baseline.name == agent.name and not agent.learns:
-            return evaluation, evaluation
-        return evaluation, evaluate(runner, baseline, settings.eval_episodes, settings.seed, **kwargs)
+        bases = {}
+        for name, baseline in baselines.items():
+            same = baseline.name == agent.name and not agent.learns
+            bases[name] = evaluation if same else evaluate(runner, baseline, settings.eval_episodes,
+                                                           settings.seed, **kwargs)  # fmt: skip
+        return evaluation, bases
     finally:
         runner.close()
 
@@ -249,6 +283,7 @@ def _training_summary(agent: Dispatcher, state: TrainState, episodes: int) -> di
         "gradient_steps": int(stats.get("gradient_steps", 0)),
         "target_updates": int(stats.get("target_updates", 0)),
         "final_epsilon": stats.get("epsilon", math.nan),
+        "validation_s": state.validation_s,
         "truncated": sum(r.truncated for r in state.rows),
         "mean_travel_time": float(np.mean(charged)) if charged else math.nan,
         "mean_switches": float(np.mean([r.switches for r in state.rows])) if state.rows else math.nan,
@@ -261,16 +296,16 @@ def _write_outputs(
     if state.rows:
         atomic_write_text(run_dir / TRAIN_CSV, episodes_csv_text(state.rows))
         plot_learning_curve({result.evaluation.agent: state.rows}, run_dir / CURVE_PNG,
-                            title=f"{result.evaluation.agent}: travel time per training episode")  # fmt: skip
+                            title=f"{result.evaluation.agent}: travel time per training episode",
+                            validation=state.validation)  # fmt: skip
     atomic_write_text(run_dir / EVAL_CSV, episodes_csv_text(result.evaluation.rows))
-    if result.baseline is not None:
-        atomic_write_text(run_dir / BASELINE_CSV, episodes_csv_text(result.baseline.rows))
+    for name, base in result.baselines.items():
+        atomic_write_text(run_dir / baseline_csv(name), episodes_csv_text(base.rows))
     out = results_dict(result.evaluation, config)
     out["training"] = result.training
-    if result.baseline is not None:
-        out["baseline"] = {
-            "agent": result.baseline.agent,
-            "summary": dataclasses.asdict(result.baseline.summary),
-        }
-        out["paired_vs_baseline"] = result.paired
+    if state.validation.points:
+        out["validation"] = state.validation.to_dict()
+    if result.baselines:
+        out["baselines"] = {name: {"summary": dataclasses.asdict(base.summary), "paired": result.paired[name]}
+                            for name, base in result.baselines.items()}  # fmt: skip
     atomic_write_json(run_dir / RESULTS_JSON, out)

@@ -6,7 +6,10 @@ interrupted one wrote after its last checkpoint):
 - ``charts/travel_time``, ``charts/episodic_return``, ``charts/queue_wait``, ``charts/switches``,
   ``charts/truncated`` (per training episode), ``charts/epsilon``, ``charts/transitions_per_second``;
 - ``losses/td_loss`` and ``losses/q_values``: means over the gradient steps of the episode;
-- ``eval/travel_time`` (the agent), ``eval/baseline_travel_time``, ``eval/paired_difference``;
+- ``eval/travel_time`` (the agent), and per baseline rule ``eval/<rule>_travel_time`` and
+  ``eval/paired_difference_<rule>`` (agent minus rule on the same episodes);
+- the periodic held-out validation (:mod:`evcd.loops.validation`): ``eval/validation_travel_time``
+  (the policy without exploration) and ``eval/validation_<rule>`` (the rules on the same episodes);
 - the run's resolved configuration as text (``config``).
 """
 
@@ -21,6 +24,7 @@ from typing import Any
 from torch.utils.tensorboard import SummaryWriter
 
 from evcd.env.runners.base import EpisodeRow
+from evcd.loops.validation import ValidationRecord
 
 
 class TrainLog:
@@ -70,16 +74,33 @@ class TrainLog:
         self._totals = now
 
     def evaluation(
-        self, evaluation: Any, baseline: Any | None, paired: Mapping[str, Any] | None, step: int
+        self,
+        evaluation: Any,
+        baselines: Mapping[str, Any],
+        paired: Mapping[str, Mapping[str, Any]],
+        step: int,
     ) -> None:
-        """Log the evaluation means (an :class:`~evcd.loops.evaluate.EvalResult` each) at ``step``."""
+        """Log the evaluation means (an :class:`~evcd.loops.stats.EvalResult` each) at ``step``."""
         value = evaluation.summary.mean_travel_time
         if math.isfinite(value):
             self.writer.add_scalar("eval/travel_time", value, step)
-        if baseline is not None and math.isfinite(baseline.summary.mean_travel_time):
-            self.writer.add_scalar("eval/baseline_travel_time", baseline.summary.mean_travel_time, step)
-        if paired is not None and math.isfinite(paired["mean_difference"]):
-            self.writer.add_scalar("eval/paired_difference", paired["mean_difference"], step)
+        for name, base in baselines.items():
+            if math.isfinite(base.summary.mean_travel_time):
+                self.writer.add_scalar(f"eval/{name}_travel_time", base.summary.mean_travel_time, step)
+            difference = paired[name]["mean_difference"]
+            if math.isfinite(difference):
+                self.writer.add_scalar(f"eval/paired_difference_{name}", difference, step)
+
+    def validation(self, record: ValidationRecord, step: int) -> None:
+        """Log the latest validation point and the rules' means on the same episodes at ``step``."""
+        if not record.points:
+            return
+        mean = record.points[-1].mean
+        if math.isfinite(mean):
+            self.writer.add_scalar("eval/validation_travel_time", mean, step)
+        for name, rule_mean in record.to_dict()["rule_means"].items():
+            if rule_mean is not None:
+                self.writer.add_scalar(f"eval/validation_{name}", rule_mean, step)
 
     def flush(self) -> None:
         """Write pending events to disk."""

@@ -20,6 +20,7 @@ from typing import Any
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRow
 from evcd.loops.run_files import CHECKPOINTS, OUTPUTS, RESULTS_JSON
+from evcd.loops.validation import ValidationRecord
 from evcd.utils.checkpoint import CheckpointError, has_checkpoint, load_checkpoint, save_checkpoint
 
 log = logging.getLogger(__name__)
@@ -38,12 +39,15 @@ class TrainState:
     wall_s: float = 0.0  # training wall time over every session (day builds excluded)
     prepare_s: float = 0.0  # day builds of the training runner
     sessions: int = 0  # how many times training was started or resumed
+    validation_s: float = 0.0  # wall time of the periodic validations (not in wall_s)
     rows: list[EpisodeRow] = dataclasses.field(default_factory=list)
+    validation: ValidationRecord = dataclasses.field(default_factory=ValidationRecord)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values for the checkpoint."""
-        d = dataclasses.asdict(self)
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         d["rows"] = [dataclasses.asdict(r) for r in self.rows]
+        d["validation"] = self.validation.to_dict()
         return d
 
     @classmethod
@@ -51,6 +55,7 @@ class TrainState:
         """The inverse of :meth:`to_dict`."""
         values = dict(d)
         values["rows"] = [EpisodeRow(**r) for r in values["rows"]]
+        values["validation"] = ValidationRecord.from_dict(values.get("validation"))
         return cls(**values)
 
 
@@ -62,7 +67,7 @@ def check_run_dir(run_dir: Path, resume: bool) -> None:
         FileNotFoundError: ``resume=True`` but the directory holds no checkpoint and no results.
     """
     ckpt = run_dir / CHECKPOINTS
-    written = [name for name in OUTPUTS if (run_dir / name).exists()]
+    written = sorted(p.name for pattern in OUTPUTS for p in run_dir.glob(pattern))
     if not resume and (has_checkpoint(ckpt) or written):
         found = "a checkpoint" if has_checkpoint(ckpt) else ", ".join(written)
         raise FileExistsError(

@@ -182,6 +182,53 @@ def plot_training_curves(
     return atomic_write_png(fig, path)
 
 
+def plot_validation_curves(
+    panels: Mapping[tuple[str, int], Mapping[str, Sequence[Sequence[tuple[int, float]]]]],
+    rules: Mapping[tuple[str, int], Mapping[str, float]],
+    path: str | Path,
+    colors: Mapping[str, Any] | None = None,
+) -> Path:
+    """Save the periodic held-out validation: a panel per (regime, evs), a line per learner.
+
+    Args:
+        panels: (regime, evs) -> agent -> each seed's points ``(training episodes done, mean travel
+            time on the validation episodes)``; the line is the mean over seeds at each point, the
+            band the min-max over seeds.
+        rules: (regime, evs) -> rule -> its validation mean averaged over seeds (horizontal lines).
+        path: PNG to write (atomically).
+        colors: agent -> colour.
+    """
+    keys = sorted(panels)
+    colors = colors or agent_colors(list(dict.fromkeys(a for p in panels.values() for a in p)))
+    fig = Figure(figsize=(max(6.5, 5.4 * len(keys)), 4.8))
+    axes = fig.subplots(1, len(keys), squeeze=False)[0]
+    for ax, key in zip(axes, keys, strict=True):
+        shown = []
+        for agent, runs in panels[key].items():
+            steps = sorted({e for run in runs for e, _ in run})
+            values = np.array([[dict(run).get(e, math.nan) for e in steps] for run in runs], dtype=float)
+            with np.errstate(all="ignore"):
+                mean = np.nanmean(values, axis=0)
+            ax.fill_between(steps, np.nanmin(values, axis=0), np.nanmax(values, axis=0), color=colors[agent],
+                            alpha=0.2, linewidth=0)  # fmt: skip
+            ax.plot(steps, mean, "o-", color=colors[agent], lw=1.8, label=f"{agent} ({len(runs)} seeds)")
+            shown.append(values[np.isfinite(values)])
+        for (rule, value), (c, ls) in zip(rules.get(key, {}).items(), REFERENCE_STYLES, strict=False):
+            if math.isfinite(value):
+                ax.axhline(value, color=c, ls=ls, lw=1.3, label=f"{rule}: {value:.0f} s")
+                shown.append(np.array([value]))
+        _set_log_range(ax, np.concatenate(shown))
+        ax.set_title(f"regime {key[0]}, {key[1]} EVs", fontsize=10)
+        ax.set_xlabel("training episodes played")
+        ax.set_ylabel("validation travel time (s, log)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8, loc="upper right")
+    fig.suptitle("Held-out validation during training: the policy without exploration on the same\n"
+                 "episodes of the tuning days (band: min-max over seeds)", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    return atomic_write_png(fig, path)
+
+
 def plot_scenario_day(
     net: sumolib.net.Net,
     stations: Sequence[Station],

@@ -14,6 +14,7 @@ and ``.hydra/``) counts as a sweep of one job.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import logging
@@ -55,7 +56,11 @@ class IncompleteSweepError(ResultsError):
 
 @dataclass(frozen=True)
 class JobResult:
-    """One finished job, from its ``results.json`` (NaN where it has null): a row of the results table."""
+    """One finished job, from its ``results.json`` (NaN where it has null): a row of the results table.
+
+    ``eval_days`` are the days its evaluation episodes ran on (from the episodes themselves), with
+    the mean travel time on each in ``day_means``.
+    """
 
     regime: str
     agent: str
@@ -75,7 +80,14 @@ class JobResult:
     day_build_s: float
     train_days: tuple[int, ...]
     eval_days: tuple[int, ...]
+    day_means: tuple[tuple[int, float], ...]  # per evaluation day: (day, mean travel time)
     job_dir: Path
+    #: per evaluation episode: (reset seed, travel time; NaN if truncated), for paired comparisons
+    episode_travel: tuple[tuple[int, float], ...] = dataclasses.field(default=(), repr=False, compare=False)
+    #: the periodic held-out validation: (training episodes done, mean travel time) per point
+    validation: tuple[tuple[int, float], ...] = dataclasses.field(default=(), repr=False, compare=False)
+    #: the rules' mean travel times on the same validation episodes, by rule
+    validation_rules: tuple[tuple[str, float], ...] = dataclasses.field(default=(), repr=False, compare=False)
 
     @property
     def key(self) -> tuple[str, str, int, int]:
@@ -197,7 +209,16 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
     config = data.get("config")
     if not isinstance(config, Mapping):
         raise KeyError("config")
-    eval_days = (config.get("eval") or {}).get("days", (config.get("env") or {}).get("demand_seeds"))
+    episodes = data.get("episodes") or []
+    validation = data.get("validation") or {}
+    played = sorted({int(e["day"]) for e in episodes if int(e.get("day", -1)) >= 0})
+    configured = (config.get("eval") or {}).get("days", (config.get("env") or {}).get("demand_seeds"))
+    travel = tuple((int(e["seed"]), math.nan if e["truncated"] else float(e["travel_time"]))
+                   for e in episodes)  # fmt: skip
+    day_means = []
+    for day in played:
+        charged = [float(e["travel_time"]) for e in episodes if int(e["day"]) == day and not e["truncated"]]
+        day_means.append((day, sum(charged) / len(charged) if charged else math.nan))
     return JobResult(
         regime=str(config.get("regime") or "unknown"),
         agent=str(data["agent"]),
@@ -216,8 +237,14 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
         train_wall_s=_float(training.get("wall_s", 0.0)),
         day_build_s=_float(training.get("day_build_s", 0.0)),
         train_days=_days((config.get("train") or {}).get("days")),
-        eval_days=_days(eval_days),
+        eval_days=tuple(played) if played else _days(configured),
+        day_means=tuple(day_means),
         job_dir=job_dir,
+        episode_travel=travel,
+        validation=tuple(
+            (int(p["episodes_done"]), _float(p.get("mean"))) for p in validation.get("points", ())
+        ),
+        validation_rules=tuple((str(k), _float(v)) for k, v in (validation.get("rule_means") or {}).items()),
     )
 
 

@@ -32,7 +32,9 @@ import numpy as np
 
 from evcd.env.runners.base import EpisodeRow
 from evcd.loops.run_files import TRAIN_CSV, read_episodes_csv
-from evcd.report.figures import agent_colors, plot_results_bars, plot_training_curves
+from evcd.report.figures import agent_colors, plot_results_bars, plot_training_curves, plot_validation_curves
+from evcd.report.markdown import format_stat, markdown_table, num
+from evcd.report.paired import paired_markdown
 from evcd.report.seed_stats import MIN_GAP_S, SeedStat, gap_share, seed_interval
 from evcd.report.sweep import Collection, JobResult, ResultsError, collect
 from evcd.utils.atomic import atomic_write_text
@@ -44,6 +46,7 @@ CSV_NAME = "results.csv"
 MD_NAME = "results.md"
 BARS_PNG = "results_bars.png"
 CURVES_PNG = "learning_curves.png"
+VALIDATION_PNG = "validation_curves.png"
 
 #: Column order of agents; other agents follow alphabetically.
 AGENT_ORDER = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
@@ -58,8 +61,8 @@ PAPER_TRAVEL_TIME: dict[str, dict[int, float]] = {
 }
 PAPER_LABELS = {"random": "random", "greedy": "greedy", "dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
 
-#: Columns of ``results.csv``: the fields of a job.
-CSV_COLUMNS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(JobResult))
+#: Columns of ``results.csv``: the fields of a job (its per-episode values stay in its results.json).
+CSV_COLUMNS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(JobResult) if f.repr)
 
 
 @dataclass(frozen=True)
@@ -121,25 +124,6 @@ def results_csv_text(jobs: Sequence[JobResult]) -> str:
 
 
 # ---------------------------------------------------------------------------------------- Markdown
-def _num(x: float, digits: int = 1) -> str:
-    return f"{x:.{digits}f}" if math.isfinite(x) else "—"
-
-
-def format_stat(stat: SeedStat, digits: int = 1) -> str:
-    """``mean [low, high] n=k`` (no interval for one seed, ``—`` for none)."""
-    if stat.n == 0:
-        return "—"
-    if stat.n == 1:
-        return f"{_num(stat.mean, digits)} n=1"
-    return f"{_num(stat.mean, digits)} [{_num(stat.low, digits)}, {_num(stat.high, digits)}] n={stat.n}"
-
-
-def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
-    """A Markdown table: the first column left-aligned, the others right-aligned."""
-    rule = "|---|" + "---:|" * (len(header) - 1)
-    return ["| " + " | ".join(header) + " |", rule, *("| " + " | ".join(r) + " |" for r in rows)]
-
-
 def _values(jobs: Sequence[JobResult], field: str) -> str:
     counts: dict[str, int] = defaultdict(int)
     for job in jobs:
@@ -171,7 +155,7 @@ def _main_table(jobs: Sequence[JobResult]) -> list[str]:
     rows = []
     for evs in sorted({j.evs for j in jobs}):
         cells = [format_stat(seed_interval(means.get((regime, a, evs), {}).values())) for a in agents]
-        paper = [_num(PAPER_TRAVEL_TIME[a].get(evs, math.nan), 0) for a in PAPER_TRAVEL_TIME]
+        paper = [num(PAPER_TRAVEL_TIME[a].get(evs, math.nan), 0) for a in PAPER_TRAVEL_TIME]
         rows.append([str(evs), *cells, *paper])
     return [
         "### Mean travel time (s)",
@@ -181,7 +165,7 @@ def _main_table(jobs: Sequence[JobResult]) -> list[str]:
         "truncated has no mean and is left out). The *paper* columns are Song et al.'s table: whole day, "
         "mean over its 50 training episodes (exploration included), one run.",
         "",
-        *_table(header, rows),
+        *markdown_table(header, rows),
     ]
 
 
@@ -215,7 +199,7 @@ def _gap_table(jobs: Sequence[JobResult], rng: np.random.Generator, resamples: i
         f"interval over seeds]. *no room*: G - H below {MIN_GAP_S:g} s or its 95% interval across seeds "
         "includes 0.",
         "",
-        *_table(["EVs", "greedy - hindsight (s)", *agents], rows),
+        *markdown_table(["EVs", "greedy - hindsight (s)", *agents], rows),
     ]
 
 
@@ -235,8 +219,8 @@ def _detail_table(jobs: Sequence[JobResult]) -> list[str]:
         rows.append([
             agent, str(evs), str(len(group)),
             f"{sum(j.truncated for j in group)} / {sum(j.eval_episodes for j in group)}",
-            _num(seed_interval(j.mean_queue_wait for j in group).mean),
-            _num(seed_interval(j.train_wall_s for j in group).mean, 0) if learns else "—",
+            num(seed_interval(j.mean_queue_wait for j in group).mean),
+            num(seed_interval(j.train_wall_s for j in group).mean, 0) if learns else "—",
         ])  # fmt: skip
     header = ["agent", "EVs", "seeds", "truncated / episodes", "mean queue wait (s)"]
     header.append("training wall time (s)")
@@ -246,7 +230,7 @@ def _detail_table(jobs: Sequence[JobResult]) -> list[str]:
         "Truncated evaluation episodes over all seeds; queue wait and training wall time (day builds "
         "excluded): means over seeds.",
         "",
-        *_table(header, rows),
+        *markdown_table(header, rows),
     ]
 
 
@@ -257,7 +241,7 @@ def _paper_table(jobs: Sequence[JobResult]) -> list[str]:
             agent, str(evs),
             format_stat(seed_interval(j.train_mean_travel_time for j in group)),
             format_stat(seed_interval(j.mean_travel_time for j in group)),
-            _num(PAPER_TRAVEL_TIME.get(agent, {}).get(evs, math.nan), 0),
+            num(PAPER_TRAVEL_TIME.get(agent, {}).get(evs, math.nan), 0),
         ])  # fmt: skip
     return [
         "### The paper's way: mean over the training episodes",
@@ -266,7 +250,7 @@ def _paper_table(jobs: Sequence[JobResult]) -> list[str]:
         "the paper reports; rules do not train), then mean [95% interval] over seeds; evaluation mean as "
         "above.",
         "",
-        *_table(["agent", "EVs", "training mean (s)", "evaluation mean (s)", "paper (s)"], rows),
+        *markdown_table(["agent", "EVs", "training mean (s)", "evaluation mean (s)", "paper (s)"], rows),
     ]
 
 
@@ -287,6 +271,7 @@ def results_markdown(
     for regime, group in _by_regime(jobs).items():
         lines += ["", f"## Regime `{regime}`", "", _jobs_line(group), ""]
         lines += [*_main_table(group), "", *_gap_table(group, rng, resamples), "", *_detail_table(group)]
+        lines += ["", *paired_markdown(group)]
         if regime == "paper":
             lines += ["", *_paper_table(group)]
     if collection.gaps:
@@ -322,6 +307,27 @@ def training_rows(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, 
     return dict(sorted(out.items()))
 
 
+Points = list[tuple[int, float]]  # (training episodes done, validation mean travel time)
+
+
+def validation_points(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, list[Points]]]:
+    """(regime, evs) -> agent -> each seed's periodic validation points, for the jobs that validated."""
+    out: dict[tuple[str, int], dict[str, list[Points]]] = {}
+    for job in jobs:
+        if job.validation:
+            out.setdefault((job.regime, job.evs), {}).setdefault(job.agent, []).append(list(job.validation))
+    return dict(sorted(out.items()))
+
+
+def validation_rule_means(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, float]]:
+    """(regime, evs) -> rule -> its validation mean over the seeds of the jobs that validated."""
+    values: dict[tuple[str, int], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for job in jobs:
+        for rule, mean in job.validation_rules:
+            values[job.regime, job.evs][rule].append(mean)
+    return {key: {rule: float(np.mean(v)) for rule, v in rules.items()} for key, rules in values.items()}
+
+
 def make_table(
     dirs: Sequence[str | Path],
     out_dir: str | Path | None = None,
@@ -347,7 +353,7 @@ def make_table(
     if not dirs:
         raise ResultsError("no directory given")
     out = Path(out_dir) if out_dir is not None else Path(dirs[0])
-    names = (CSV_NAME, MD_NAME, BARS_PNG, CURVES_PNG)
+    names = (CSV_NAME, MD_NAME, BARS_PNG, CURVES_PNG, VALIDATION_PNG)
     existing = [str(out / n) for n in names if (out / n).exists()]
     if existing and not overwrite:
         raise FileExistsError(f"refusing to overwrite {', '.join(existing)} (pass overwrite / --overwrite)")
@@ -368,6 +374,10 @@ def make_table(
         paths.append(plot_training_curves(curves, out / CURVES_PNG, references, colors))
     else:
         log.info("no job trained (no learner): %s not drawn", CURVES_PNG)
+    validation = validation_points(collection.jobs)
+    if validation:
+        rules = validation_rule_means(collection.jobs)
+        paths.append(plot_validation_curves(validation, rules, out / VALIDATION_PNG, colors))
     figures = [p.name for p in paths if p.suffix == ".png"]
     markdown = results_markdown(collection, resamples, bootstrap_seed, figures)
     paths.insert(1, atomic_write_text(out / MD_NAME, markdown))

@@ -69,10 +69,10 @@ MANIFEST = "manifest.json"
 ROUTES = "routes.rou.xml.gz"
 _CHUNK = 1 << 20
 _ENTRY_FIELDS = {"state", "state_sha256", "controller", "controller_sha256"}
-# the modules whose behaviour shapes a cached day: editing one invalidates the cache
 _told = [False]  # whether the one-time explanation of a day build was logged in this process
 # a progress bar over simulated time (of day) with the wall time left
 _BAR = "{desc}: {percentage:3.0f}% of {total:.0f} sim s [{elapsed}<{remaining}]"
+# the modules whose behaviour shapes a cached day: editing one invalidates the cache
 _CODE = ("scenario/demand.py", "scenario/routing.py", "sim/charging.py", "sim/driver.py", "sim/snapshots.py")
 
 

@@ -165,6 +165,11 @@ def test_target_network_starts_as_a_frozen_copy():
 # -- TD targets -----------------------------------------------------------------------------------------
 
 
+def _discounts(agent: DQNAgent, rewards: torch.Tensor) -> torch.Tensor:
+    """One-step transitions: the bootstrap is worth gamma."""
+    return torch.full_like(rewards, agent.config.gamma)
+
+
 def _batch(seed: int, n: int = 16):
     rng = np.random.default_rng(seed)
     rewards = torch.from_numpy(rng.uniform(-2, 2, n).astype(np.float32))
@@ -183,7 +188,9 @@ def test_double_target_by_hand(dueling):
         q_online, q_target = agent.online(next_obs), agent.target(next_obs)
     best = q_online.argmax(dim=1)
     expected = rewards + 0.9 * (1 - terminated) * q_target[torch.arange(16), best]
-    torch.testing.assert_close(agent.td_targets(rewards, next_obs, terminated), expected)
+    torch.testing.assert_close(
+        agent.td_targets(rewards, next_obs, terminated, _discounts(agent, rewards)), expected
+    )
     # the online and target networks really disagree here, so the choice of network matters
     assert not torch.allclose(q_online, q_target)
 
@@ -196,7 +203,7 @@ def test_plain_target_is_the_max_of_the_target_network(dueling):
     with torch.no_grad():
         q_target, q_online = agent.target(next_obs), agent.online(next_obs)
     expected = rewards + 0.8 * (1 - terminated) * q_target.max(dim=1).values
-    got = agent.td_targets(rewards, next_obs, terminated)
+    got = agent.td_targets(rewards, next_obs, terminated, _discounts(agent, rewards))
     torch.testing.assert_close(got, expected)
     assert not torch.allclose(got, rewards + 0.8 * (1 - terminated) * q_online.max(dim=1).values)
 
@@ -216,8 +223,8 @@ def test_double_and_plain_targets_differ_when_the_argmaxes_disagree(dueling):
         q_online = double.online(next_obs)
     assert (q_online.argmax(dim=1) == 0).all()
     assert (q_target.argmax(dim=1) == 1).all()
-    t_plain = plain.td_targets(rewards, next_obs, terminated)
-    t_double = double.td_targets(rewards, next_obs, terminated)
+    t_plain = plain.td_targets(rewards, next_obs, terminated, _discounts(plain, rewards))
+    t_double = double.td_targets(rewards, next_obs, terminated, _discounts(double, rewards))
     torch.testing.assert_close(t_plain, rewards + 0.5 * (1 - terminated) * q_target[:, 1])
     torch.testing.assert_close(t_double, rewards + 0.5 * (1 - terminated) * q_target[:, 0])
     live = terminated == 0
@@ -248,6 +255,95 @@ def test_only_termination_cuts_the_bootstrap(double, terminated, truncated, boot
     y = 0.5 * 3.0 + 0.7 * bootstrap
     q = 0.0  # Q_online(s, 1)
     assert agent.learn() == pytest.approx((q - y) ** 2, rel=1e-6)
+
+
+# -- n-step returns -------------------------------------------------------------------------------------
+
+
+def _stored(agent: DQNAgent) -> list[tuple]:
+    """The replay's transitions in the order stored: (obs[0], reward, next_obs[0], terminated,
+    truncated, discount)."""
+    s = agent.replay.state_dict()
+    columns = (s["obs"][:, 0], s["rewards"], s["next_obs"][:, 0], s["terminated"], s["truncated"],
+               s["discounts"])  # fmt: skip
+    kinds = (float, float, float, bool, bool, float)
+    return [tuple(kind(c[i]) for kind, c in zip(kinds, columns, strict=True)) for i in range(s["size"])]
+
+
+def _chain(start: int, rewards: list[float], end: str | None) -> list[Transition]:
+    """Transitions s_k -> s_k+1 with obs[0] = k (to tell them apart) and the given rewards; the last
+    one terminated (``end="terminated"``) or truncated, or neither (``None``)."""
+    out = []
+    for k, r in enumerate(rewards):
+        last = k == len(rewards) - 1
+        obs, nxt = np.full(OBS_DIM, start + k, np.float32), np.full(OBS_DIM, start + k + 1, np.float32)
+        out.append(Transition(obs, 0, r, nxt, last and end == "terminated", last and end == "truncated"))
+    return out
+
+
+def test_n_step_transitions_by_hand():
+    """n = 3, gamma 0.5: each stored transition sums the next three rewards and bootstraps from the
+    observation three steps on at 0.125; near the end of an episode it sums what is left, the
+    termination cutting the bootstrap and a truncation bootstrapping at gamma ** (steps left)."""
+    agent = _agent(n_step=3, gamma=0.5, reward_scale=2.0, learning_starts=10**6)
+    terminated = _chain(0, [1.0, 2.0, 4.0, 8.0, 16.0], "terminated")
+    for i, t in enumerate(terminated):
+        agent.observe(t)
+        assert len(agent.replay) == max(0, i - 1) if i < 4 else len(agent.replay) == 5
+    assert agent.steps == 5 and not agent.episode.pending
+    assert _stored(agent) == [
+        (0.0, 2 * (1 + 0.5 * 2 + 0.25 * 4), 3.0, False, False, 0.125),
+        (1.0, 2 * (2 + 0.5 * 4 + 0.25 * 8), 4.0, False, False, 0.125),
+        (2.0, 2 * (4 + 0.5 * 8 + 0.25 * 16), 5.0, True, False, 0.125),
+        (3.0, 2 * (8 + 0.5 * 16), 5.0, True, False, 0.25),
+        (4.0, 2 * 16.0, 5.0, True, False, 0.5),
+    ]
+    # an episode truncated inside the n steps: both transitions bootstrap from its last observation
+    for t in _chain(10, [1.0, 3.0], "truncated"):
+        agent.observe(t)
+    assert _stored(agent)[5:] == [
+        (10.0, 2 * (1 + 0.5 * 3), 12.0, False, True, 0.25),
+        (11.0, 6.0, 12.0, False, True, 0.5),
+    ]
+
+
+def test_n_step_windows_are_kept_per_episode():
+    """Two episodes whose steps interleave (the batched engine): each transition sums its own
+    episode's rewards."""
+    agent = _agent(n_step=2, gamma=0.5, learning_starts=10**6)
+    a, b = agent.new_episode(np.random.default_rng(0)), agent.new_episode(np.random.default_rng(1))
+    first, second = _chain(0, [1.0, 2.0, 4.0], "terminated"), _chain(20, [10.0, 20.0], None)
+    for ta, tb in zip(first, second, strict=False):
+        agent.observe(ta, a)
+        agent.observe(tb, b)
+    agent.observe(first[2], a)
+    assert len(b.pending) == 1 and not a.pending  # b goes on; its last step is not stored yet
+    assert _stored(agent) == [
+        (0.0, 1 + 0.5 * 2, 2.0, False, False, 0.25),
+        (20.0, 10 + 0.5 * 20, 22.0, False, False, 0.25),
+        (1.0, 2 + 0.5 * 4, 3.0, True, False, 0.25),
+        (2.0, 4.0, 3.0, True, False, 0.5),
+    ]
+
+
+def test_n_step_target_bootstraps_at_gamma_to_the_n():
+    agent = _agent(n_step=3, gamma=0.5, learning_starts=10**6, hidden=(8,))
+    _set_head_bias(agent.target, [2.0, 9.0, 4.0])  # max Q_target(s', .) = 9 whatever s'
+    for t in _chain(0, [1.0, 1.0, 1.0, 1.0], None):
+        agent.observe(t)
+    batch = agent.replay.sample(2, np.random.default_rng(0), 1.0)
+    targets = agent.td_targets(torch.from_numpy(batch.rewards), agent._input(batch.next_obs),
+                               torch.from_numpy(batch.terminated.astype(np.float32)),
+                               torch.from_numpy(batch.discounts))  # fmt: skip
+    torch.testing.assert_close(targets, torch.full((2,), 1.75 + 0.125 * 9.0))
+
+
+def test_one_step_stores_each_transition_at_once_at_gamma():
+    agent = _agent(gamma=0.9, learning_starts=10**6)
+    for t in _chain(0, [1.0, 2.0], "terminated"):
+        agent.observe(t)
+    discount = float(np.float32(0.9))
+    assert _stored(agent) == [(0.0, 1.0, 1.0, False, False, discount), (1.0, 2.0, 2.0, True, False, discount)]
 
 
 # -- exploration ----------------------------------------------------------------------------------------
@@ -729,6 +825,7 @@ def test_learning_changes_only_the_online_network_between_target_updates():
         ({"loss": "l1"}, "loss='l1'"),
         ({"exploration": "bogus"}, "exploration='bogus'"),
         ({"target_update": 0}, "target_update=0"),
+        ({"n_step": 0}, "n_step=0"),
         ({"train_freq": 0}, "train_freq=0"),
         ({"gradient_steps": -1}, "gradient_steps=-1"),
         ({"learning_starts": -1}, "learning_starts=-1"),

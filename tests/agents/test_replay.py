@@ -25,10 +25,12 @@ def _obs(i: float) -> np.ndarray:
 
 
 def _filled(n: int, capacity: int | None = None, **kwargs) -> PrioritizedReplayBuffer:
-    """Transition ``i`` has obs ``i``, action ``i % 4``, reward ``i``, next obs ``i + 1``."""
+    """Transition ``i`` has obs ``i``, action ``i % 4``, reward ``i``, next obs ``i + 1``, discount
+    ``1 / (i + 1)``."""
     buf = PrioritizedReplayBuffer(capacity or n, OBS_DIM, **kwargs)
     for i in range(n):
-        buf.add(_obs(i), i % 4, float(i), _obs(i + 1), terminated=i % 3 == 0, truncated=i % 3 == 1)
+        buf.add(_obs(i), i % 4, float(i), _obs(i + 1), terminated=i % 3 == 0, truncated=i % 3 == 1,
+                discount=1 / (i + 1))  # fmt: skip
     return buf
 
 
@@ -248,10 +250,11 @@ def test_batch_fields_and_dtypes():
     buf = _filled(20)
     batch = buf.sample(8, np.random.default_rng(0), beta=0.4)
     assert isinstance(batch, Batch)
-    assert Batch._fields[:8] == ("obs", "actions", "rewards", "next_obs", "terminated", "truncated",
-                                 "weights", "indices")  # fmt: skip
+    assert Batch._fields[:9] == ("obs", "actions", "rewards", "next_obs", "terminated", "truncated",
+                                 "discounts", "weights", "indices")  # fmt: skip
     assert batch.obs.shape == batch.next_obs.shape == (8, OBS_DIM)
     assert batch.obs.dtype == batch.next_obs.dtype == batch.rewards.dtype == batch.weights.dtype == np.float32
+    assert batch.discounts.dtype == np.float32
     assert batch.actions.dtype == batch.indices.dtype == np.int64
     assert batch.terminated.dtype == batch.truncated.dtype == bool
     ids = batch.obs[:, 0].astype(int)
@@ -259,6 +262,7 @@ def test_batch_fields_and_dtypes():
     np.testing.assert_array_equal(batch.next_obs[:, 0], ids + 1)
     np.testing.assert_array_equal(batch.actions, ids % 4)
     np.testing.assert_array_equal(batch.rewards, ids)
+    np.testing.assert_array_equal(batch.discounts, (1 / (ids + 1)).astype(np.float32))
 
 
 def test_terminated_and_truncated_kept_apart():
@@ -373,6 +377,9 @@ def test_add_rejects_bad_transitions():
         buf.add(_obs(0), 0, math.nan, _obs(0), False, False)
     with pytest.raises(ValueError, match="action -1"):
         buf.add(_obs(0), -1, 0.0, _obs(0), False, False)
+    for discount in (-0.1, 1.5, math.nan):
+        with pytest.raises(ValueError, match="discount="):
+            buf.add(_obs(0), 0, 0.0, _obs(0), False, False, discount=discount)
     assert len(buf) == 0
 
 

@@ -208,9 +208,9 @@ def test_batched_learning_is_deterministic(make_env):
         seen = []
         agent_observe = agent.observe
 
-        def observe(t, agent_observe=agent_observe, seen=seen):
+        def observe(t, episode=None, agent_observe=agent_observe, seen=seen):
             seen.append((t.action, t.reward, t.terminated, t.truncated, t.obs.tobytes()))
-            agent_observe(t)
+            agent_observe(t, episode)
 
         agent.observe = observe  # type: ignore[method-assign]
         rows = runner.run(specs, agent, explore=True, learn=True)

@@ -114,4 +114,4 @@ def test_hindsight_through_the_training_script(script_overrides, tmp_path):
     assert data["hindsight"]["best_station"] == [e["station"] for e in data["episodes"]]
     assert len(data["hindsight"]["travel_time_by_station"]) == 3
     # paired with greedy on the same episodes: never slower where both charged
-    assert data["paired_vs_baseline"]["agent_slower"] == 0 and data["baseline"]["agent"] == "greedy"
+    assert data["baselines"]["greedy"]["paired"]["agent_slower"] == 0

@@ -20,12 +20,13 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from evcd.agents import make_agent
 from evcd.env.runners import EpisodeRow, SingleEnvRunner
 from evcd.loops.run_files import CHECKPOINTS, RESULTS_JSON, TRAIN_CSV
-from evcd.loops.seeds import EVAL_STREAM, TRAIN_STREAM, bootstrap_rng, episode_specs
+from evcd.loops.seeds import EVAL_STREAM, TRAIN_STREAM, VALIDATION_STREAM, bootstrap_rng, episode_specs
 from evcd.loops.stats import paired_difference
-from evcd.loops.train import TrainSettings, train_and_evaluate
+from evcd.loops.train import TrainSettings, train_and_evaluate, training_specs
 from evcd.loops.train_state import check_run_dir
+from evcd.loops.validation import ValidationSettings
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint
-from tests.agents.toy_env import ToyDispatchEnv
+from tests.agents.toy_env import ToyDispatchEnv, greedy_travel, optimal_travel
 from tests.conftest import run_script
 
 SMALL = {"hidden": (16, 16), "lr": 1e-3, "batch_size": 8, "buffer_size": 200, "gamma": 0.9,
@@ -44,6 +45,10 @@ def toy_runners(phase: str) -> SingleEnvRunner:
 
 def greedy():
     return make_agent("greedy", 3, np.random.default_rng(0))
+
+
+def BASELINES():  # noqa: N802  (a constant's factory: fresh agents per run)
+    return {"greedy": greedy()}
 
 
 def settings(**kw) -> TrainSettings:
@@ -122,13 +127,13 @@ def trained(tmp_path_factory):
     torch.set_num_threads(1)
     run_dir = tmp_path_factory.mktemp("train") / "run"
     agent = learner()
-    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baseline=greedy(), config=CONFIG)
+    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baselines=BASELINES(), config=CONFIG)
     return run_dir, agent, result
 
 
 def test_a_run_writes_every_file(trained):
     run_dir, _agent, _result = trained
-    for name in ("train_episodes.csv", "episodes.csv", "baseline_episodes.csv", "results.json",
+    for name in ("train_episodes.csv", "episodes.csv", "baseline_greedy_episodes.csv", "results.json",
                  "learning_curve.png", "checkpoints/latest.json"):  # fmt: skip
         assert (run_dir / name).is_file(), name
     train_rows = read_csv(run_dir / TRAIN_CSV)
@@ -137,7 +142,7 @@ def test_a_run_writes_every_file(trained):
         s.reset_seed for s in episode_specs(3, range(30), TRAIN_STREAM)
     ]
     eval_rows = read_csv(run_dir / "episodes.csv")
-    base_rows = read_csv(run_dir / "baseline_episodes.csv")
+    base_rows = read_csv(run_dir / "baseline_greedy_episodes.csv")
     assert (
         [r["seed"] for r in eval_rows]
         == [r["seed"] for r in base_rows]
@@ -156,8 +161,7 @@ def test_results_json_holds_training_evaluation_and_the_paired_comparison(traine
         "episodes",
         "config",
         "training",
-        "baseline",
-        "paired_vs_baseline",
+        "baselines",
     } <= set(data)
     t = data["training"]
     transitions = sum(len(r["choices"].split("-")) for r in read_csv(run_dir / TRAIN_CSV))
@@ -165,10 +169,11 @@ def test_results_json_holds_training_evaluation_and_the_paired_comparison(traine
     assert t["gradient_steps"] == agent.gradient_steps == transitions - SMALL["learning_starts"] + 1
     assert t["target_updates"] == agent.target_updates == agent.gradient_steps // SMALL["target_update"]
     assert t["wall_s"] > 0 and t["transitions_per_second"] > 0
-    assert data["agent"] == "dueling_ddqn" and data["baseline"]["agent"] == "greedy"
-    paired = data["paired_vs_baseline"]
+    assert data["agent"] == "dueling_ddqn" and set(data["baselines"]) == {"greedy"}
+    paired = data["baselines"]["greedy"]["paired"]
     agent_t = [float(r["travel_time"]) for r in read_csv(run_dir / "episodes.csv")]
-    base_t = [float(r["travel_time"]) for r in read_csv(run_dir / "baseline_episodes.csv")]
+    base_t = [float(r["travel_time"]) for r in read_csv(run_dir / "baseline_greedy_episodes.csv")]
+    assert data["baselines"]["greedy"]["summary"]["mean_travel_time"] == pytest.approx(np.mean(base_t))
     assert paired["pairs"] == 12
     assert paired["mean_difference"] == pytest.approx(np.mean(agent_t) - np.mean(base_t))
     assert data["summary"]["mean_travel_time"] == pytest.approx(np.mean(agent_t))
@@ -182,7 +187,7 @@ def test_tensorboard_has_the_curves_and_the_config(trained):
     scalars = set(acc.Tags()["scalars"])
     expected = {"charts/travel_time", "charts/episodic_return", "charts/epsilon",
                 "charts/transitions_per_second", "charts/switches", "losses/td_loss", "losses/q_values",
-                "eval/travel_time", "eval/baseline_travel_time", "eval/paired_difference"}  # fmt: skip
+                "eval/travel_time", "eval/greedy_travel_time", "eval/paired_difference_greedy"}  # fmt: skip
     assert expected <= scalars
     travel = acc.Scalars("charts/travel_time")
     assert len(travel) == 30
@@ -198,12 +203,16 @@ def test_tensorboard_has_the_curves_and_the_config(trained):
 def test_a_rule_agent_is_only_evaluated(tmp_path):
     run_dir = tmp_path / "rule"
     agent = make_agent("random", 3, np.random.default_rng(1))
-    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baseline=greedy())
+    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baselines=BASELINES())
     assert result.training["episodes"] == 0 and result.training["transitions"] == 0
     assert not (run_dir / CHECKPOINTS).exists() and not (run_dir / TRAIN_CSV).exists()
-    assert result.paired is not None and result.paired["pairs"] == 12
-    same = train_and_evaluate(greedy(), toy_runners, settings(), tmp_path / "greedy", baseline=greedy())
-    assert same.paired["mean_difference"] == 0.0 and same.baseline is same.evaluation
+    assert result.paired["greedy"]["pairs"] == 12
+    rules = {"greedy": greedy(), "queue_aware": queue_aware()}
+    same = train_and_evaluate(greedy(), toy_runners, settings(), tmp_path / "greedy", baselines=rules)
+    assert same.paired["greedy"]["mean_difference"] == 0.0 and same.baselines["greedy"] is same.evaluation
+    assert same.baselines["queue_aware"] is not same.evaluation
+    assert set(same.paired) == {"greedy", "queue_aware"}
+    assert (tmp_path / "greedy" / "baseline_queue_aware_episodes.csv").is_file()
 
 
 # ---------------------------------------------------------------------------------------- resume
@@ -221,8 +230,8 @@ def test_an_interrupted_run_resumes_to_the_same_weights_and_results(trained, tmp
     ref_dir, ref_agent, ref = trained
     run_dir = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
-        train_and_evaluate(learner(), interrupted_after(stop_after), settings(), run_dir, baseline=greedy(),
-                           config=CONFIG)  # fmt: skip
+        train_and_evaluate(learner(), interrupted_after(stop_after), settings(), run_dir,
+                           baselines=BASELINES(), config=CONFIG)  # fmt: skip
     done = (stop_after - 1) // 10 * 10  # the interrupted chunk never reached its checkpoint
     if done == 0:  # no checkpoint yet: nothing to resume, a new run starts afresh
         with pytest.raises(FileNotFoundError, match="no checkpoint"):
@@ -231,7 +240,7 @@ def test_an_interrupted_run_resumes_to_the_same_weights_and_results(trained, tmp
     saved = load_checkpoint(run_dir / CHECKPOINTS)["trainer"]
     assert saved["episodes_done"] == done
     agent = learner(seed=99)  # a different initialisation: everything must come from the checkpoint
-    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baseline=greedy(), resume=True,
+    result = train_and_evaluate(agent, toy_runners, settings(), run_dir, baselines=BASELINES(), resume=True,
                                 config={**CONFIG, "resume": True, "progress": True})  # fmt: skip
     mine, ref_w = _weights(agent), _weights(ref_agent)
     assert mine.keys() == ref_w.keys() and all(torch.equal(mine[k], ref_w[k]) for k in mine)
@@ -291,9 +300,9 @@ def test_a_checkpoint_of_another_observation_size_is_refused(trained, tmp_path):
 def test_the_bootstrap_of_the_comparison_is_seeded(trained):
     _run_dir, _, result = trained
     rows_a = result.evaluation.rows
-    rows_b = result.baseline.rows
+    rows_b = result.baselines["greedy"].rows
     again = paired_difference(rows_a, rows_b, bootstrap_rng(3), 500)
-    assert again == result.paired
+    assert again == result.paired["greedy"]
 
 
 # ---------------------------------------------------------------------------------------- curves figure
@@ -305,7 +314,7 @@ def test_plot_curves_overlays_runs_and_csv_files(trained, tmp_path):
     run_dir, _, _ = trained
     out = tmp_path / "curves.png"
     proc = plot_curves(
-        str(run_dir), str(run_dir / "baseline_episodes.csv"), "--out", str(out), "--reference", "x=1"
+        str(run_dir), str(run_dir / "baseline_greedy_episodes.csv"), "--out", str(out), "--reference", "x=1"
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -319,3 +328,96 @@ def test_plot_curves_overlays_runs_and_csv_files(trained, tmp_path):
     for bad, needle in bad_calls:
         proc = plot_curves(*bad, "--out", str(tmp_path / "other.png"))
         assert proc.returncode == 2 and needle in proc.stderr, proc.stderr
+
+
+# ---------------------------------------------------------------------------------------- validation
+def queue_aware():
+    return make_agent("queue_aware", 3, np.random.default_rng(0), points=1)
+
+
+def validated_settings(**kw) -> TrainSettings:
+    return settings(validation=ValidationSettings(every=10, episodes=8), **kw)
+
+
+@pytest.fixture(scope="module")
+def validated(tmp_path_factory, trained):
+    """The run of ``trained`` again, with a validation every 10 training episodes."""
+    torch.set_num_threads(1)
+    run_dir = tmp_path_factory.mktemp("validated") / "run"
+    agent = learner()
+    rules = {"greedy": greedy(), "queue_aware": queue_aware()}
+    result = train_and_evaluate(agent, toy_runners, validated_settings(), run_dir, baselines=BASELINES(),
+                                config=CONFIG, validation_rules=rules)  # fmt: skip
+    return run_dir, agent, result
+
+
+def test_the_periodic_validation_does_not_touch_training(trained, validated):
+    """A run with validations trains to exactly the weights, rows and evaluation of one without."""
+    (plain_dir, plain, plain_result), (run_dir, agent, result) = trained, validated
+    assert agent.steps == plain.steps and agent.gradient_steps == plain.gradient_steps
+    for a, b in zip(agent.online.parameters(), plain.online.parameters(), strict=True):
+        assert torch.equal(a, b)
+
+    def rows(d):
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in read_csv(d / TRAIN_CSV)]
+
+    assert rows(run_dir) == rows(plain_dir)
+    assert [r.travel_time for r in result.evaluation.rows] == [
+        r.travel_time for r in plain_result.evaluation.rows
+    ]
+
+
+def test_the_validation_plays_the_same_held_out_episodes_beside_the_rules(validated):
+    run_dir, _agent, result = validated
+    data = json.loads((run_dir / RESULTS_JSON).read_text())["validation"]
+    assert [p["episodes_done"] for p in data["points"]] == [10, 20, 30]
+    assert all(len(p["travel_times"]) == 8 for p in data["points"])
+    assert set(data["rules"]) == {"greedy", "queue_aware"}
+    # the rules ran the validation episodes: greedy's travel times are the toy's greedy ones, and
+    # nothing beats the toy's optimum on them
+    specs = episode_specs(3, range(8), VALIDATION_STREAM)
+    assert data["rules"]["greedy"] == [greedy_travel(s.reset_seed) for s in specs]
+    optimum = [optimal_travel(s.reset_seed) for s in specs]
+    assert all(o <= t for o, t in zip(optimum, data["rules"]["queue_aware"], strict=True))
+    assert all(o <= t for p in data["points"] for o, t in zip(optimum, p["travel_times"], strict=True))
+    assert not {s.reset_seed for s in specs} & {
+        s.reset_seed for s in episode_specs(3, range(30), TRAIN_STREAM)
+    }
+    first, last = data["points"][0]["mean"], data["points"][-1]["mean"]
+    assert last <= first  # it learns on this problem (30 episodes are few; not worse than at 10)
+    acc = EventAccumulator(str(run_dir / "tensorboard"))
+    acc.Reload()
+    tags = set(acc.Tags()["scalars"])
+    assert {"eval/validation_travel_time", "eval/validation_greedy", "eval/validation_queue_aware"} <= tags
+    assert [e.step for e in acc.Scalars("eval/validation_travel_time")] == [
+        p["transitions"] for p in data["points"]
+    ]
+    assert result.training["validation_s"] > 0
+
+
+def test_a_resumed_run_keeps_its_validation_curve(validated, tmp_path):
+    run_dir, _agent, _result = validated
+    stopped = tmp_path / "run"
+    rules = {"greedy": greedy(), "queue_aware": queue_aware()}
+    with pytest.raises(KeyboardInterrupt):
+        train_and_evaluate(learner(), interrupted_after(15), validated_settings(), stopped,
+                           baselines=BASELINES(), config=CONFIG, validation_rules=rules)  # fmt: skip
+    train_and_evaluate(learner(), toy_runners, validated_settings(), stopped, baselines=BASELINES(),
+                       config=CONFIG, resume=True, validation_rules=rules)  # fmt: skip
+    resumed = json.loads((stopped / RESULTS_JSON).read_text())["validation"]
+    assert resumed == json.loads((run_dir / RESULTS_JSON).read_text())["validation"]
+
+
+def test_validation_must_fall_on_the_training_calls():
+    with pytest.raises(
+        ValueError, match=r"validation.every=15: must be a multiple of train.checkpoint_every=10"
+    ):
+        settings(validation=ValidationSettings(every=15, episodes=4))
+
+
+def test_several_training_days_are_played_in_turn_one_call_each():
+    specs = training_specs(settings(episodes=50, checkpoint_every=10, rotate_days=3))
+    assert [s.options["day"] for s in specs[::10]] == [0, 1, 2, 0, 1]
+    assert all(s.options["day"] == specs[10 * (i // 10)].options["day"] for i, s in enumerate(specs))
+    plain = training_specs(settings(episodes=50, checkpoint_every=10))
+    assert [s.reset_seed for s in specs] == [s.reset_seed for s in plain] and plain[0].options is None

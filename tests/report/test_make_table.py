@@ -27,7 +27,17 @@ import yaml
 from evcd.env.runners import EpisodeRow
 from evcd.loops.run_files import episodes_csv_text
 from evcd.report.sweep import IncompleteSweepError, ResultsError, collect, expand_sweep
-from evcd.report.table import BARS_PNG, CSV_COLUMNS, CSV_NAME, CURVES_PNG, MD_NAME, make_table
+from evcd.report.table import (
+    BARS_PNG,
+    CSV_COLUMNS,
+    CSV_NAME,
+    CURVES_PNG,
+    MD_NAME,
+    VALIDATION_PNG,
+    make_table,
+    validation_points,
+    validation_rule_means,
+)
 from tests.conftest import run_script
 
 T_0975_4 = 2.7764451051977987  # Student t, 97.5% quantile, 4 degrees of freedom
@@ -413,3 +423,103 @@ def test_script_exit_codes(tmp_path):
     assert "- failed: experiment=table agent=dqn seed=1 evs=200" in partial.stdout
     rows = list(csv.DictReader(io.StringIO((tmp_path / "out2" / CSV_NAME).read_text())))
     assert len(rows) == 5
+
+
+# ---------------------------------------------------------------------------------------- days and pairs
+#: queue_aware's travel times of the 4 evaluation episodes of seed s are QA + 10 s; dqn adds
+#: DQN_OFFSET + 4 s (mean difference 5 + 4 s); dueling_ddqn adds DDQN_OFFSET to dqn's, and its last
+#: episode of seed 2 is truncated (left out of its pairs).
+QA = (100.0, 200.0, 300.0, 400.0)
+DQN_OFFSET = (10.0, -20.0, 30.0, 0.0)
+DDQN_OFFSET = (5.0, 5.0, 5.0, -15.0)
+
+
+def episode_times(agent: str, seed: int) -> list[float]:
+    qa = [t + 10 * seed for t in QA]
+    dqn = [q + d + 4 * seed for q, d in zip(qa, DQN_OFFSET, strict=True)]
+    return {
+        "queue_aware": qa,
+        "dqn": dqn,
+        "dueling_ddqn": [t + d for t, d in zip(dqn, DDQN_OFFSET, strict=True)],
+    }[agent]
+
+
+def write_day_sweep(root: Path) -> Path:
+    """Three agents, three seeds, each seed evaluated on its own day (101 + seed), 4 episodes each."""
+    agents, seeds = ("queue_aware", "dqn", "dueling_ddqn"), (0, 1, 2)
+    write_sweep(root, agents=agents, evs=(200,), seeds=seeds)
+    for agent, seed in itertools.product(agents, seeds):
+        path = job_dir(root, agent, 200, seed) / "results.json"
+        data = json.loads(path.read_text())
+        times = episode_times(agent, seed)
+        truncated = [agent == "dueling_ddqn" and seed == 2 and k == 3 for k in range(4)]
+        data["episodes"] = [
+            {"episode": k, "seed": 500 + k, "day": 101 + seed, "travel_time": t, "truncated": trunc}
+            for k, (t, trunc) in enumerate(zip(times, truncated, strict=True))
+        ]
+        data["config"]["eval"]["days"] = [101, 102, 103]  # day_per_seed: the configured list, one played
+        path.write_text(json.dumps(data))
+    return root
+
+
+def section_row(markdown: str, section: str, first_header: str, first_cell: str) -> dict[str, str]:
+    """:func:`table_row` within the section headed ``section``."""
+    lines = markdown.splitlines()
+    return table_row("\n".join(lines[lines.index(section) :]), first_header, first_cell)
+
+
+def test_cells_name_their_days_and_their_per_day_means(tmp_path):
+    sweep = write_day_sweep(tmp_path / "days")
+    jobs = {(j.agent, j.seed): j for j in collect([sweep]).jobs}
+    assert jobs["queue_aware", 1].eval_days == (102,)  # the day it played, not the configured list
+    assert jobs["queue_aware", 1].day_means == ((102, statistics.mean(QA) + 10),)
+    out = make_table([sweep], tmp_path / "out", resamples=200)
+    days = section_row(out.markdown, "### Evaluation days", "agent", "queue_aware")
+    assert days["days"] == "3"
+    assert (
+        days["per day: mean travel time (s)"]
+        == "101 (seed 0): 250.0, 102 (seed 1): 260.0, 103 (seed 2): 270.0"
+    )
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "out" / CSV_NAME).read_text())))
+    assert {r["eval_days"] for r in rows} == {"[101]", "[102]", "[103]"}
+
+
+def test_paired_differences_are_by_episode_within_seed_then_across_seeds(tmp_path):
+    out = make_table([write_day_sweep(tmp_path / "days")], tmp_path / "out", resamples=200)
+    row = section_row(out.markdown, "### Paired differences (s)", "EVs", "200")
+    # dqn - queue_aware: per seed 5 + 4 s -> 5, 9, 13; mean 9, t interval 9 +- t(0.975, 2) * 4 / sqrt(3)
+    half = 4.302652729911275 * 4.0 / math.sqrt(3)
+    # faster / slower pairs: one faster in each seed (the -20), the others slower but seed 0's 0
+    assert row["dqn - queue_aware"] == f"+9.0 [{9 - half:+.1f}, {9 + half:+.1f}] n=3; 3 / 8 of 12"
+    # dueling_ddqn - dqn: 0 in seeds 0 and 1; seed 2 without its truncated episode: +5
+    assert row["dueling_ddqn - dqn"].startswith("+1.7 [") and row["dueling_ddqn - dqn"].endswith(
+        "; 2 / 9 of 11"
+    )
+    per_seed = section_row(out.markdown, "### Paired differences (s)", "pair", "dqn - queue_aware")
+    assert per_seed["per seed (seed: mean difference, s)"] == "0: +5.0 / 1: +9.0 / 2: +13.0"
+
+
+def test_validation_curves_average_the_seeds_and_stay_out_of_the_csv(tmp_path):
+    root = write_sweep(tmp_path / "val", agents=("greedy", "dqn"), evs=(200,), seeds=(0, 1))
+    for seed in (0, 1):
+        path = job_dir(root, "dqn", 200, seed) / "results.json"
+        data = json.loads(path.read_text())
+        data["validation"] = {
+            "points": [{"episodes_done": e, "transitions": 10 * e, "mean": 500.0 - e / 2 + seed * 10,
+                        "travel_times": []} for e in (100, 200)],
+            "rules": {},
+            "rule_means": {"greedy": 450.0 + seed, "queue_aware": 320.0 + 3 * seed},
+        }  # fmt: skip
+        path.write_text(json.dumps(data))
+    jobs = {(j.agent, j.seed): j for j in collect([root]).jobs}
+    assert jobs["dqn", 1].validation == ((100, 460.0), (200, 410.0))
+    assert jobs["greedy", 0].validation == ()
+    assert validation_rule_means(jobs.values()) == {("table", 200): {"greedy": 450.5, "queue_aware": 321.5}}
+    seeds = [[(100, 450.0), (200, 400.0)], [(100, 460.0), (200, 410.0)]]
+    assert validation_points(jobs.values())[("table", 200)]["dqn"] == seeds
+    out = make_table([root], tmp_path / "out", resamples=200)
+    assert VALIDATION_PNG in {p.name for p in out.paths}
+    image = matplotlib.image.imread(tmp_path / "out" / VALIDATION_PNG)
+    assert image.shape[1] > 400 and image.std() > 0.05
+    header = (tmp_path / "out" / CSV_NAME).read_text().splitlines()[0].split(",")
+    assert "validation" not in header and "episode_travel" not in header and "eval_days" in header

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import itertools
 import json
 import subprocess
 import textwrap
@@ -132,12 +133,34 @@ def test_every_agent_and_experiment_composes_and_builds(experiment, evs, scenari
         assert agent.name == name and agent.n_stations == 3
 
 
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_the_days_of_every_shipped_experiment_are_disjoint(experiment):
+    """Training, tuning, calibration and evaluation days never meet, and each use draws on its own."""
+    cfg = compose_train(f"experiment={experiment}")
+    days = {use: set(seeds) for use, seeds in cfg.days.items()}
+    assert set(days) == {"train", "tuning", "calibration", "evaluation"}
+    for (a, x), (b, y) in itertools.combinations(days.items(), 2):
+        assert not x & y, (experiment, a, b, sorted(x & y))
+    assert set(cfg.train.days) <= days["train"] and set(cfg.env.demand_seeds) <= days["train"]
+    assert set(cfg.eval.days) <= days["evaluation"]
+    assert set(cfg.train.validation.days) <= days["tuning"]
+
+
+def test_each_seed_can_run_on_its_own_evaluation_day(small, tmp_path):
+    out = tmp_path / "run"
+    proc = run_train(*small, "agent=greedy", "eval.day_per_seed=true", "days.evaluation=[5,6,7]", "seed=4",
+                     f"hydra.run.dir={out}")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    data = json.loads((out / "results.json").read_text())
+    assert {e["day"] for e in data["episodes"]} == {6}  # days[4 mod 3]
+
+
 def test_experiments_exist_and_the_default_is_the_peak():
     assert {"peak", "paper"} <= set(EXPERIMENTS)
     cfg = compose_train()
     assert cfg.agent.name == "dueling_ddqn" and cfg.evs == 400
     assert list(cfg.env.departure_window) == [25200.0, 36000.0]
-    assert list(cfg.eval.days) != list(cfg.train.days) and cfg.eval.baseline == "greedy"
+    assert list(cfg.eval.days) != list(cfg.train.days) and "greedy" in cfg.eval.baselines
     assert cfg.env.reward == "time" and cfg.learner.exploration == "episode"
 
 
@@ -192,8 +215,7 @@ def test_a_tiny_training_run_end_to_end(small, tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     data = json.loads((out / "results.json").read_text())
     assert data["agent"] == "dqn" and data["training"]["episodes"] == 4
-    assert data["training"]["transitions"] >= 4 and data["paired_vs_baseline"]["pairs"] <= 2
-    assert data["baseline"]["agent"] == "greedy"
+    assert data["training"]["transitions"] >= 4 and data["baselines"]["greedy"]["paired"]["pairs"] <= 2
     assert data["config"]["agent"]["name"] == "dqn"
     assert len(read_csv(out / "train_episodes.csv")) == 4 and len(read_csv(out / "episodes.csv")) == 2
     ckpt = load_checkpoint(out / "checkpoints")
@@ -210,7 +232,11 @@ def test_a_tiny_training_run_end_to_end(small, tmp_path):
     )
     assert len(acc.Scalars("charts/travel_time")) == 4
     log = proc.stdout + proc.stderr
-    assert "vs greedy on the same" in log and "mean travel time" in log
+    assert "vs greedy on the same" in log and "vs queue_aware on the same" in log
+    assert "mean travel time" in log
+    days = sorted({int(r["day"]) for r in read_csv(out / "episodes.csv")})
+    assert days == [101, 102]  # the peak regime's two evaluation days, one episode each
+    assert all(f"evaluation day {d} (1 episodes): dqn " in log for d in days)
     # the trained policy runs in the evaluation command too, and sees what it was trained on (raw
     # observations) whether the environment normalises them or not: the same actions
     plain = [o for o in small if not o.startswith(("learner.", "eval."))]
@@ -222,7 +248,7 @@ def test_a_tiny_training_run_end_to_end(small, tmp_path):
             "agent=dqn",
             f"agent.checkpoint={out}",
             "episodes=2",
-            "env.demand_seeds=[1]",
+            "env.demand_seeds=[101,102]",  # the peak regime's evaluation days
             "env.reward=time",
             f"env.normalize_obs={normalize}",
             f"hydra.run.dir={ev}",
@@ -237,7 +263,7 @@ def test_a_rule_agent_goes_through_the_same_script(small, tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     data = json.loads((out / "results.json").read_text())
     assert data["training"]["episodes"] == 0 and not (out / "checkpoints").exists()
-    assert data["paired_vs_baseline"] is not None
+    assert data["baselines"]["greedy"]["paired"] is not None
 
 
 def reference_run(small: list[str], out: Path, engine: str) -> Path:
@@ -282,11 +308,13 @@ def test_a_killed_run_resumes_to_the_same_result(small, uninterrupted, tmp_path,
     assert "resuming after" in resumed.stdout + resumed.stderr
     mine, ref = final_weights(out), final_weights(uninterrupted)
     assert mine.keys() == ref.keys() and all(torch.equal(mine[k], ref[k]) for k in mine)
-    for name in ("train_episodes.csv", "episodes.csv", "baseline_episodes.csv"):
+    for name in ("train_episodes.csv", "episodes.csv", "baseline_greedy_episodes.csv"):
         assert read_csv(out / name) == read_csv(uninterrupted / name), name
     a, b = (json.loads((d / "results.json").read_text()) for d in (out, uninterrupted))
     assert a["summary"]["mean_travel_time"] == b["summary"]["mean_travel_time"]
-    assert a["paired_vs_baseline"] == b["paired_vs_baseline"] and a["training"]["sessions"] == 2
+    for rule in ("greedy", "queue_aware"):
+        assert a["baselines"][rule]["paired"] == b["baselines"][rule]["paired"]
+    assert a["training"]["sessions"] == 2
     assert not list((out / "checkpoints").glob(".*.tmp"))  # the half-written file was cleaned up
 
 
@@ -313,16 +341,21 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("evs=-1", "evs=-1"),
         ("eval.days=[]", "eval.days=[]"),
         ("env.demand_seeds=[4]", "train.days"),
-        ("eval.baseline=dqn", "eval.baseline='dqn'"),
+        ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is not a rule"),
         ("resume=true", "no checkpoint"),
         ("agent.checkpoint=x.pt", "agent.checkpoint"),
         ("engine=fast", "engine='fast'"),
         ("batch_episodes=0", "batch_episodes=0"),
+        ("train.validation.every=3", "validation.every=3: must be a multiple of train.checkpoint_every"),
+        ("train.validation.every=2 train.validation.days=[0]", "train.validation.days share [0]"),
+        ("eval.days=[-1]", "eval.days=[-1]"),
     ],
 )
 def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
     out = tmp_path / "run"
-    proc = run_train(*small, "agent=dqn", override, f"hydra.run.dir={out}")
+    proc = run_train(
+        *small, "agent=dqn", "train.checkpoint_every=2", *override.split(), f"hydra.run.dir={out}"
+    )
     assert proc.returncode == 2, proc.stderr[-2000:]
     log = proc.stdout + proc.stderr
     assert needle in log
@@ -365,7 +398,7 @@ def test_a_corrupted_checkpoint_is_reported_on_resume(small, uninterrupted, tmp_
 
 def test_the_table_experiment_runs_without_a_baseline_in_the_calibrated_world(small, tmp_path):
     cfg = compose_train("experiment=table")
-    assert cfg.regime == "table" and cfg.eval.baseline is None
+    assert cfg.regime == "table" and list(cfg.eval.baselines) == []
     assert cfg.scenario.charging_points == 1 and cfg.scenario.path == "sumo_net/jurong_west"
     assert list(cfg.env.departure_window) == [0.0, 86400.0] and cfg.env.max_travel_time == 14400.0
     assert not set(cfg.train.days) & set(cfg.eval.days)
@@ -374,5 +407,5 @@ def test_the_table_experiment_runs_without_a_baseline_in_the_calibrated_world(sm
     assert proc.returncode == 0, proc.stderr[-3000:]
     data = json.loads((out / "results.json").read_text())
     assert data["config"]["regime"] == "table" and data["config"]["scenario"]["charging_points"] == 1
-    assert "baseline" not in data and "paired_vs_baseline" not in data
-    assert not (out / "baseline_episodes.csv").exists() and len(read_csv(out / "episodes.csv")) == 2
+    assert "baselines" not in data
+    assert not list(out.glob("baseline_*")) and len(read_csv(out / "episodes.csv")) == 2

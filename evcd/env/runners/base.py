@@ -6,10 +6,11 @@
 
 A runner plays the episodes named by :class:`EpisodeSpec`\\ s (the reset seed and the agent's
 per-episode generator) with an agent, exploring or not, and, when ``learn`` is set, hands the agent
-every transition (:meth:`Policy.observe`). It returns one :class:`EpisodeRow` per spec, in the order
-of the specs, and calls ``on_episode`` as each episode ends. The loops above it (:mod:`evcd.loops`)
-never touch an environment, so a runner that plays many episodes in one simulation (the batched
-engine) plugs in behind this interface without changing them or the agents. Such a runner may keep
+every transition with its episode's state (:meth:`Policy.observe`). It returns one
+:class:`EpisodeRow` per spec, in the order of the specs, and calls ``on_episode`` as each episode
+ends. The loops above it (:mod:`evcd.loops`) never touch an environment, so a runner that plays
+many episodes in one simulation (the batched engine) plugs in behind this interface without
+changing them or the agents. Such a runner may keep
 several episodes in flight at once; what it must guarantee is that the same specs, agent state and
 settings give the same rows and the same sequence of ``observe`` calls.
 
@@ -65,8 +66,8 @@ class Policy(Protocol):
         """The stations of ``k`` episodes due at the same time: observations ``(k, 3m)`` and each
         episode's state (from :meth:`new_episode`, updated in place)."""
 
-    def observe(self, transition: Transition) -> None:
-        """Learn from one transition."""
+    def observe(self, transition: Transition, episode: Any) -> None:
+        """Learn from one transition of the episode whose state is ``episode``."""
 
 
 @dataclass(frozen=True)

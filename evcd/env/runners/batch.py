@@ -331,9 +331,9 @@ class BatchSimulation:
         the order of the specs."""
         events = sorted(self._events, key=lambda e: e[0].order)
         self._events = []
-        for _, transition, _ in events:
+        for live, transition, _ in events:
             if self.learn and transition is not None:
-                self.agent.observe(transition)
+                self.agent.observe(transition, live.agent_state)
         for live, _, row in events:
             if row is not None:
                 self.finished(live, row)

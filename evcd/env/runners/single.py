@@ -78,7 +78,7 @@ class SingleEnvRunner(EpisodeRunner):
             choices.append(action)
             next_obs, reward, terminated, truncated, info = self.env.step(action)
             if learn:
-                agent.observe(Transition(obs, action, float(reward), next_obs, terminated, truncated))
+                agent.observe(Transition(obs, action, float(reward), next_obs, terminated, truncated), state)
             obs = next_obs
             total += float(reward)
         return row_from_info(

@@ -1,0 +1,154 @@
+"""Periodic held-out evaluation during training: a curve that shows learning, not the time of day.
+
+The training curve of a run plays each call's episodes in the order of their departures, so it
+rises and falls with the peaks of the day. The validation curve does not: every ``every`` training
+episodes the current policy, without exploration and without learning, plays the same fixed set of
+validation episodes (stream :data:`~evcd.loops.seeds.VALIDATION_STREAM` of the run seed, on the
+validation days), and the rules (greedy, queue_aware) play the very same episodes once, so that
+each point of the curve is comparable with the others and with the rules.
+
+The validation neither explores nor learns and draws from generators of its own, so a run with it
+trains to exactly the weights of a run without it (tested).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from evcd.agents.base import Agent
+from evcd.env.runners import EpisodeRow, EpisodeRunner
+from evcd.loops.seeds import VALIDATION_STREAM, episode_specs
+from evcd.utils.validation import check_int
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ValidationSettings:
+    """When and on what the policy is validated during training.
+
+    Attributes:
+        every: training episodes between two validations (0: none); a multiple of the run's
+            ``checkpoint_every``, so that validating does not change how training episodes are
+            grouped into engine calls.
+        episodes: validation episodes.
+    """
+
+    every: int = 0
+    episodes: int = 30
+
+    def __post_init__(self) -> None:
+        check_int("train.validation.every", self.every, minimum=0)
+        check_int("train.validation.episodes", self.episodes, minimum=1)
+
+
+@dataclass
+class ValidationPoint:
+    """The policy's validation after ``episodes_done`` training episodes (``transitions`` seen)."""
+
+    episodes_done: int
+    transitions: int
+    travel_times: list[float]  # per validation episode; NaN where it was truncated
+
+    @property
+    def mean(self) -> float:
+        """Mean travel time over the episodes that charged (NaN if none)."""
+        charged = [t for t in self.travel_times if math.isfinite(t)]
+        return float(np.mean(charged)) if charged else math.nan
+
+
+@dataclass
+class ValidationRecord:
+    """Every validation of a run and the rules' travel times on the same episodes (saved in the
+    training checkpoints, so that a resumed run keeps its curve)."""
+
+    points: list[ValidationPoint] = field(default_factory=list)
+    rules: dict[str, list[float]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values (NaN as ``None``: strict JSON)."""
+
+        def plain(values: list[float]) -> list[float | None]:
+            return [v if math.isfinite(v) else None for v in values]
+
+        return {
+            "points": [{"episodes_done": p.episodes_done, "transitions": p.transitions,
+                        "mean": p.mean if math.isfinite(p.mean) else None,
+                        "travel_times": plain(p.travel_times)} for p in self.points],
+            "rules": {name: plain(times) for name, times in self.rules.items()},
+            "rule_means": {name: _mean(times) for name, times in self.rules.items()},
+        }  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any] | None) -> ValidationRecord:
+        """The inverse of :meth:`to_dict`."""
+        if not d:
+            return cls()
+
+        def floats(values: list[Any]) -> list[float]:
+            return [math.nan if v is None else float(v) for v in values]
+
+        points = [ValidationPoint(int(p["episodes_done"]), int(p["transitions"]), floats(p["travel_times"]))
+                  for p in d.get("points", [])]  # fmt: skip
+        return cls(points, {name: floats(times) for name, times in d.get("rules", {}).items()})
+
+
+def _mean(values: list[float]) -> float | None:
+    charged = [v for v in values if math.isfinite(v)]
+    return float(np.mean(charged)) if charged else None
+
+
+def _travel_times(rows: list[EpisodeRow]) -> list[float]:
+    return [math.nan if r.truncated else float(r.travel_time) for r in rows]
+
+
+class Validator:
+    """Plays the validation episodes (see the module docstring).
+
+    Args:
+        runners: makes the validation runner (``runners("validation")``); made and closed per
+            validation (libsumo: one simulation per process, the training runner's is closed first).
+        settings: how often and how many episodes.
+        seed: the run seed.
+        rules: the rules validated once on the same episodes, by name.
+    """
+
+    def __init__(
+        self,
+        runners: Callable[[str], EpisodeRunner],
+        settings: ValidationSettings,
+        seed: int,
+        rules: Mapping[str, Agent],
+    ) -> None:
+        self.runners = runners
+        self.settings = settings
+        self.specs = episode_specs(seed, range(settings.episodes), VALIDATION_STREAM)
+        self.rules = dict(rules)
+
+    def due(self, episodes_done: int, total: int) -> bool:
+        """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""
+        every = self.settings.every
+        return every > 0 and (episodes_done % every == 0 or episodes_done == total)
+
+    def validate(self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord) -> None:
+        """Play the validation episodes with ``agent`` (and, the first time, the rules); add a point."""
+        runner = self.runners("validation")
+        try:
+            runner.prepare()
+            for name, rule in self.rules.items():
+                if name not in record.rules:
+                    record.rules[name] = _travel_times(runner.run(self.specs, rule))
+            rows = runner.run(self.specs, agent)
+        finally:
+            runner.close()
+        point = ValidationPoint(episodes_done, transitions, _travel_times(rows))
+        record.points.append(point)
+        rules = ", ".join(f"{n} {_mean(t) or math.nan:.1f} s" for n, t in record.rules.items())
+        log.info("validation after %d episodes: %.1f s over %d episodes (%s)", episodes_done, point.mean,
+                 len(rows), rules)  # fmt: skip
