@@ -192,8 +192,11 @@ def test_the_learner_block_is_the_dqn_config():
     assert built["double"] is True and built["dueling"] is True
     peak = learner_of(compose_train("experiment=peak"))
     assert (peak.gamma, peak.exploration, peak.loss, peak.target_update) == (0.9, "episode", "huber", 250)
+    assert peak.n_step == 3  # the peak experiment's own addition to the preset
+    preset = learner_of(compose_train("~experiment", "learner=peak"))
+    assert peak == dataclasses.replace(preset, n_step=3)
     table = learner_of(compose_train("experiment=table"))
-    assert table == dataclasses.replace(peak, gamma=0.97, exploration_steps=2000)  # the peak preset + two
+    assert table == dataclasses.replace(preset, gamma=0.97, exploration_steps=2000)  # the peak preset + two
     with pytest.raises(ConfigCompositionException, match="bogus"):
         compose_train("learner.bogus=1")
     with pytest.raises(ConfigCompositionException, match="lr"):
