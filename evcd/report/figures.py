@@ -166,20 +166,29 @@ def plot_training_curves(
                 ax.fill_between(x, lo, hi, color=colors[agent], alpha=0.2, linewidth=0)
                 ax.plot(x, mean, color=colors[agent], lw=1.8, label=f"{agent} ({len(runs)} seeds)")
                 shown += [mean, lo[window:], hi[window:]]
-            for (label, value), (c, ls) in zip((references or {}).get((regime, evs), {}).items(),
-                                               REFERENCE_STYLES, strict=False):  # fmt: skip
-                if math.isfinite(value):
-                    ax.axhline(value, color=c, ls=ls, lw=1.3, label=f"{label}: {value:.0f} s")
-                    shown.append(np.array([value]))
-            _set_log_range(ax, np.concatenate(shown))
-            ax.set_title(f"regime {regime}, {evs} EVs (rolling mean of {window})", fontsize=10)
-            ax.set_xlabel("training episodes played")
-            ax.set_ylabel("travel time to charge start (s, log)")
-            ax.grid(alpha=0.3, which="both")
-            ax.legend(fontsize=8, loc="upper right")
+            _finish_curve_axes(ax, (references or {}).get((regime, evs), {}), shown,
+                               f"regime {regime}, {evs} EVs (rolling mean of {window})",
+                               "travel time to charge start (s, log)")  # fmt: skip
     fig.suptitle(CURVES_TITLE)
     fig.tight_layout()
     return atomic_write_png(fig, path)
+
+
+def _finish_curve_axes(
+    ax: Any, references: Mapping[str, float], shown: list[np.ndarray], title: str, ylabel: str
+) -> None:
+    """Draw ``references`` (label -> travel time) as horizontal lines, fit the log range to what is
+    ``shown`` and them, and label a learning-curve panel."""
+    for (label, value), (c, ls) in zip(references.items(), REFERENCE_STYLES, strict=False):
+        if math.isfinite(value):
+            ax.axhline(value, color=c, ls=ls, lw=1.3, label=f"{label}: {value:.0f} s")
+            shown.append(np.array([value]))
+    _set_log_range(ax, np.concatenate(shown))
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel("training episodes played")
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="upper right")
 
 
 def plot_validation_curves(
@@ -213,16 +222,8 @@ def plot_validation_curves(
                             alpha=0.2, linewidth=0)  # fmt: skip
             ax.plot(steps, mean, "o-", color=colors[agent], lw=1.8, label=f"{agent} ({len(runs)} seeds)")
             shown.append(values[np.isfinite(values)])
-        for (rule, value), (c, ls) in zip(rules.get(key, {}).items(), REFERENCE_STYLES, strict=False):
-            if math.isfinite(value):
-                ax.axhline(value, color=c, ls=ls, lw=1.3, label=f"{rule}: {value:.0f} s")
-                shown.append(np.array([value]))
-        _set_log_range(ax, np.concatenate(shown))
-        ax.set_title(f"regime {key[0]}, {key[1]} EVs", fontsize=10)
-        ax.set_xlabel("training episodes played")
-        ax.set_ylabel("validation travel time (s, log)")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8, loc="upper right")
+        _finish_curve_axes(ax, rules.get(key, {}), shown, f"regime {key[0]}, {key[1]} EVs",
+                           "validation travel time (s, log)")  # fmt: skip
     fig.suptitle("Held-out validation during training: the policy without exploration on the same\n"
                  "episodes of the tuning days (band: min-max over seeds)", fontsize=10)  # fmt: skip
     fig.tight_layout()
