@@ -6,6 +6,7 @@
     python scripts/bench.py --suite replay   # replay buffer only: sample + priority update (seconds)
     python scripts/bench.py --suite throughput   # batched engine vs single env, learning, 2 processes
     python scripts/bench.py --suite engines --episodes 200 --batch-sizes 25 100   # engine equivalence
+    python scripts/bench.py --suite fleet --episodes 3   # a fleet episode vs its day alone (400 EVs, peak)
 
 Every run also times the prioritized replay buffer: ``per_sample_update_us`` (sample a batch of 32
 from 10,000 transitions and update its priorities; also as ``replay_batch_us``) and
@@ -56,10 +57,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
-    p.add_argument("--suite", choices=("env", "replay", "throughput", "engines"), default="env",
+    p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet"), default="env",
                    help="env (default): episodes, SUMO, replay; replay: the replay buffer alone; "
-                        "throughput: the batched engine's speed; engines: batched vs single")  # fmt: skip
-    p.add_argument("--episodes", type=int, default=200, help="engines suite: episode seeds (default 200)")
+                        "throughput: the batched engine's speed; engines: batched vs single; "
+                        "fleet: a fleet episode against its day alone")  # fmt: skip
+    p.add_argument("--episodes", type=int, default=200,
+                   help="engines suite: episode seeds (default 200); fleet: episodes (~3)")  # fmt: skip
+    p.add_argument("--guided-share", type=float, default=1.0, help="fleet suite: guided share (default 1)")
     p.add_argument("--batch-sizes", type=int, nargs="+", default=[25],
                    help="engines suite: batch_episodes values to compare (default 25)")  # fmt: skip
     args = p.parse_args(argv)
@@ -80,6 +84,19 @@ def main(argv: list[str] | None = None) -> int:
         log.info("wrote %s", args.out)
         return 0
     env_kwargs: dict = {"scenario": args.scenario, "evs": args.evs}
+    if args.suite == "fleet":
+        from evcd.bench.fleet import fleet_overhead
+
+        fleet_kwargs = {**env_kwargs, "guided_share": args.guided_share, "cache_dir": args.cache_dir}
+        try:
+            report = fleet_overhead(fleet_kwargs, episodes=args.episodes)
+        except ValueError as exc:
+            log.error("%s", exc)
+            return 2
+        atomic_write_text(args.out, json.dumps(report, indent=1))
+        log.info("fleet_overhead %.2f (goal %s); wrote %s", report["fleet_overhead"],
+                 report["goals"]["fleet_overhead"], args.out)  # fmt: skip
+        return 0
     if args.suite in ("throughput", "engines"):
         report = run_engine_suite(args, env_kwargs, replay)
         atomic_write_text(args.out, json.dumps(report, indent=1))

@@ -4,6 +4,8 @@ them, and the scripts run as a user runs them (a subprocess) or composed as Hydr
 - ``small_scenario``: a 4 x 4 grid with two stations (hand-built days, :mod:`tests.env.handmade`);
 - :func:`make_grid_scenario` / ``grid_env_dir``: an 8 x 8 grid with three stations; ``make_env`` makes
   environments on it with a light, short background day (:data:`GRID_ENV`);
+- ``make_fleet`` / ``make_small_fleet``: fleets (:mod:`evcd.env.fleet`) on the 8 x 8 grid and on
+  hand-built days of the small grid;
 - :func:`run_script`, :func:`compose_config` and ``script_overrides`` (a tiny run of a script on the
   8 x 8 grid): what the script tests share.
 """
@@ -25,6 +27,7 @@ from omegaconf import DictConfig
 
 from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
+from evcd.env.fleet import FleetEnv, parallel_env
 from evcd.scenario.placement import place_stations
 from evcd.scenario.scenario import STATIONS_FILE, VTYPES_FILE
 from evcd.scenario.stations_file import Station, write_stations
@@ -218,6 +221,55 @@ def run_episode(
                 "terminated": terminated,
                 "info": info,
             }
+
+
+# ---------------------------------------------------------------------------------------- the fleet
+#: A busier grid day: ~70 charging EVs in two hours, ~15 of them departing in the fleet's window.
+FLEET_DEMAND = {**GRID_DEMAND, "evs": 120, "charging_share": 0.6}
+FLEET_WINDOW = (1200.0, 3000.0)
+
+
+@pytest.fixture
+def make_fleet(grid_env_dir: Path, env_cache: Path) -> Iterator[Callable[..., FleetEnv]]:
+    """``make_fleet(**overrides)``: a fleet on the 8 x 8 grid, closed after the test."""
+    made: list[FleetEnv] = []
+
+    def make(**overrides: Any) -> FleetEnv:
+        for env in made:
+            env.close()
+        kwargs = {"scenario": grid_env_dir, "cache_dir": env_cache, "demand": FLEET_DEMAND,
+                  "departure_window": FLEET_WINDOW, **overrides}  # fmt: skip
+        made.append(parallel_env(**kwargs))
+        return made[-1]
+
+    yield make
+    for env in made:
+        env.close()
+
+
+@pytest.fixture
+def make_small_fleet(
+    small_scenario: SmallScenario, env_cache: Path, tmp_path: Path
+) -> Iterator[Callable[..., FleetEnv]]:
+    """``make_small_fleet(vehicles, **overrides)``: a fleet whose day is the hand-built ``vehicles``
+    on the 4 x 4 grid (``cs1``: index 0, 2 points; ``cs2``: index 1, 1 point)."""
+    from tests.route_xml import write_routes
+
+    made: list[FleetEnv] = []
+
+    def make(vehicles: list[str], **overrides: Any) -> FleetEnv:
+        for env in made:
+            env.close()
+        routes = write_routes(tmp_path / f"fleet{len(made)}.rou.xml", vehicles)
+        kwargs = {"scenario": small_scenario.root, "route_file": routes, "departure_window": (0.0, 300.0),
+                  "snapshot_every": 100.0, "cache_dir": env_cache, "decision_interval": 10.0,
+                  **overrides}  # fmt: skip
+        made.append(FleetEnv(**kwargs))
+        return made[-1]
+
+    yield make
+    for env in made:
+        env.close()
 
 
 # ---------------------------------------------------------------------------------------- scripts

@@ -34,6 +34,7 @@ from evcd.env.episode_rules import (
     final_info,
     slot_deadline,
     slot_end_reason,
+    visits_of,
 )
 from evcd.env.observation import Observation, RouteObserver, observation_bounds
 from evcd.env.reward import Slot, reward_fn
@@ -43,7 +44,6 @@ from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.routing import RoadGraph
 from evcd.scenario.scenario import JURONG_WEST
 from evcd.scenario.stations_file import Station
-from evcd.sim.charging import ChargeRecord
 from evcd.sim.driver import SUMO_ERRORS
 
 log = logging.getLogger(__name__)
@@ -332,9 +332,10 @@ class ChargingNavEnv(gymnasium.Env):
         self, ep: _Episode, reason: str, now: float, travel: float | None, error: str
     ) -> dict[str, Any]:
         records = self.simulation.controller.records if reason != "sumo_error" else []
-        visits = [(r.arrival_time, _visit_end(r, now)) for r in records if r.vehicle == TARGET_ID]
+        plan = ep.target.plan
         return final_info(
-            reason=reason, now=now, plan=ep.target.plan, travel=travel, visits=visits,
+            reason=reason, now=now, departure=plan.departure, origin=plan.origin, travel=travel,
+            visits=visits_of(records, TARGET_ID, now),
             day=self._day_seed(ep.day), switches=ep.target.switches, station=ep.target.station,
             stations=self.stations, error=error,
         )  # fmt: skip
@@ -376,10 +377,3 @@ class ChargingNavEnv(gymnasium.Env):
 
     def _day_seed(self, day: int) -> int:
         return self.days[day].demand_seed
-
-
-def _visit_end(record: ChargeRecord, now: float) -> float:
-    """When a visit's wait ended: charge start, leaving the queue, or now (still waiting)."""
-    if record.start_time is not None:
-        return record.start_time
-    return record.release_time if record.release_time is not None else now

@@ -24,6 +24,7 @@ import numpy as np
 
 from evcd.env.target import OriginSampler, TargetPlan
 from evcd.scenario.stations_file import Station
+from evcd.sim.charge_record import ChargeRecord
 
 #: The target counts as moving once its odometer advanced this much (m) since the last mark.
 MOVED_M = 1.0
@@ -89,7 +90,8 @@ def final_info(
     *,
     reason: str,
     now: float,
-    plan: TargetPlan,
+    departure: float,
+    origin: str,
     travel: float | None,
     visits: Sequence[tuple[float, float]],
     day: int,
@@ -103,7 +105,8 @@ def final_info(
     Args:
         reason: one of :data:`REASONS`.
         now: the end of the last step (s of day).
-        plan: the target's plan (its ``departure`` is where ``travel_time`` counts from).
+        departure: the target's scheduled departure (s of day): ``travel_time`` counts from it.
+        origin: the edge it departed from.
         travel: ``T_travel`` (s) if the target started charging, else ``None``.
         visits: ``(arrival, end of the wait)`` of every station visit (s of day).
         day: the background day's demand seed.
@@ -115,11 +118,11 @@ def final_info(
     info: dict[str, Any] = {
         "reason": reason,
         "charged": travel is not None,
-        "travel_time": travel if travel is not None else now - plan.departure,
+        "travel_time": travel if travel is not None else now - departure,
         "queue_wait": float(sum(end - arrival for arrival, end in visits)),
         "arrival": visits[-1][0] if visits else None,
-        "departure": plan.departure,
-        "origin": plan.origin,
+        "departure": departure,
+        "origin": origin,
         "day": day,
         "switches": switches,
         "station": station,
@@ -129,3 +132,15 @@ def final_info(
     if error:
         info["error"] = error
     return info
+
+
+def visits_of(records: Sequence[ChargeRecord], vehicle: str, now: float) -> list[tuple[float, float]]:
+    """``(arrival, end of the wait)`` of each station visit of ``vehicle`` among the controller's
+    ``records``: the wait ends at the charge start, when it left the queue, or ``now`` (still waiting)."""
+    return [(r.arrival_time, _wait_end(r, now)) for r in records if r.vehicle == vehicle]
+
+
+def _wait_end(record: ChargeRecord, now: float) -> float:
+    if record.start_time is not None:
+        return record.start_time
+    return record.release_time if record.release_time is not None else now

@@ -221,17 +221,36 @@ class Target:
     def stop_at(
         self, api: Any, station: Station, observer: RouteObserver, road: str, pos: float, time: float
     ) -> None:
-        """Give the target its parking stop at ``station`` (looping back if it is too close to brake).
+        """Give the target its parking stop at ``station`` (:func:`park_at`)."""
+        park_at(api, self.vehicle_id, station, observer, road, pos, time)
 
-        Raises a SUMO error if SUMO refuses every way of stopping there.
-        """
-        veh, vid = api.vehicle, self.vehicle_id
-        try:
-            veh.setParkingAreaStop(vid, station.parking_area, duration=STOP_DURATION_S)
-        except SUMO_ERRORS as exc:  # past the car park, or too close to brake for it: loop back
-            _, loop = observer.loop_route(api, road, pos, station)
-            log.debug("t=%s %s cannot stop at %s now (%s); looping via %s", time, vid, station.id, exc, loop)
-            if not loop:
-                raise
-            veh.setRoute(vid, loop)
-            veh.setParkingAreaStop(vid, station.parking_area, duration=STOP_DURATION_S)
+
+def park_at(
+    api: Any,
+    vehicle: str,
+    station: Station,
+    observer: RouteObserver,
+    road: str,
+    pos: float,
+    time: float,
+    onward: Sequence[str] = (),
+) -> None:
+    """Give ``vehicle`` (on ``road`` at lane position ``pos``) a parking stop at ``station``, looping
+    back if it is past the car park or too close to brake for it.
+
+    Args:
+        onward: edges to drive after the station (from the station's edge) when a loop replaces the
+            route (the fleet's guided EVs keep their destination); the target has none.
+
+    Raises a SUMO error if SUMO refuses every way of stopping there.
+    """
+    veh = api.vehicle
+    try:
+        veh.setParkingAreaStop(vehicle, station.parking_area, duration=STOP_DURATION_S)
+    except SUMO_ERRORS as exc:  # past the car park, or too close to brake for it: loop back
+        _, loop = observer.loop_route(api, road, pos, station)
+        log.debug("t=%s %s cannot stop at %s now (%s); looping via %s", time, vehicle, station.id, exc, loop)
+        if not loop:
+            raise
+        veh.setRoute(vehicle, [*loop, *onward[1:]])
+        veh.setParkingAreaStop(vehicle, station.parking_area, duration=STOP_DURATION_S)

@@ -306,7 +306,8 @@ class BatchSimulation:
         transition = self._transition(live, now, started=started, done=True, travel=travel)
         target = live.target
         info = final_info(
-            reason=reason, now=now, plan=live.plan, travel=travel, visits=visits,
+            reason=reason, now=now, departure=live.plan.departure, origin=live.plan.origin,
+            travel=travel, visits=visits,
             day=self.env.days[live.day].demand_seed, switches=target.switches, station=target.station,
             stations=self.env.stations, error=error,
         )  # fmt: skip

@@ -1,0 +1,78 @@
+"""The fleet's cost: a fleet episode against the same window of its day simulated alone.
+
+``fleet_overhead`` = wall time of a fleet episode (reset included: snapshot load, every guided EV
+observing and deciding at every tick, greedy) / wall time of the same span of the same day, loaded
+from the same snapshot and simulated with its charging points but nobody guided. Both are measured in
+the same process, alternating, on the same episodes; the ratio of the sums is reported.
+"""
+
+from __future__ import annotations
+
+import logging
+import time as wallclock
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from evcd.env.fleet import FleetEnv
+from evcd.loops.fleet import play_fleet
+from evcd.loops.seeds import episode_spec
+
+log = logging.getLogger(__name__)
+
+
+class _Greedy:
+    """Nearest station by road for every guided EV (no agents import: the bench's own rule)."""
+
+    name = "greedy"
+
+    def new_episode(self, rng: np.random.Generator) -> None:
+        return None
+
+    def decide(self, obs: np.ndarray, episodes: Any, explore: bool = False) -> np.ndarray:
+        m = obs.shape[-1] // 4
+        return np.argmin(obs[:, :m], axis=-1)
+
+    def observe(self, *args: Any) -> None:
+        return None
+
+
+def fleet_overhead(env_kwargs: Mapping[str, Any], episodes: int = 3, seed: int = 0) -> dict[str, Any]:
+    """Time ``episodes`` fleet episodes and the same spans of their days alone; return the figures.
+
+    Args:
+        env_kwargs: :class:`~evcd.env.fleet.FleetEnv` arguments (``guided_share`` 1 for the highest
+            competition).
+        episodes: episodes to time (evaluation stream of ``seed``).
+        seed: run seed.
+    """
+    env = FleetEnv(**env_kwargs)
+    try:
+        env.prepare()
+        fleet_s, alone_s, rows = 0.0, 0.0, []
+        for i in range(episodes):
+            spec = episode_spec(seed, i)
+            t0 = wallclock.perf_counter()
+            ep = play_fleet(env, _Greedy(), spec)
+            fleet = wallclock.perf_counter() - t0
+            end = ep.trace[-1][0]
+            sim = env.simulation
+            t0 = wallclock.perf_counter()
+            sim.start_at(env.day, env.config.departure_window[0])
+            sim.driver.step(until=end)
+            alone = wallclock.perf_counter() - t0
+            fleet_s += fleet
+            alone_s += alone
+            rows.append({"episode": i, "fleet_s": round(fleet, 3), "alone_s": round(alone, 3),
+                         "sim_span_s": end - env.config.departure_window[0], "decisions": ep.transitions,
+                         "guided": ep.measures.guided})  # fmt: skip
+            log.info("fleet episode %d: %.1f s, the day alone %.1f s (%d guided EVs, %d decisions)",
+                     i, fleet, alone, ep.measures.guided, ep.transitions)  # fmt: skip
+    finally:
+        env.close()
+    return {
+        "fleet_overhead": fleet_s / alone_s if alone_s > 0 else None,
+        "goals": {"fleet_overhead": "<= 1.5"},
+        "episodes": rows,
+    }
