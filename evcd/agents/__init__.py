@@ -12,6 +12,11 @@ drive them; the best station in hindsight, a bound rather than a policy, is
 The registry maps a name to a class path (imported on first use, so that the heuristics do not pay
 for torch) and to the defaults that name implies: ``dqn`` and ``dueling_ddqn`` are the one
 :class:`~evcd.agents.dqn.DQNAgent` with its two switches off or on.
+
+Two registered rules need the fleet's observation ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`,
+:mod:`evcd.agents.fleet_rules`): ``reservation`` and ``central``. :data:`AGENT_NAMES` lists the
+dispatchers of the single environment (each has its ``conf/agent/<name>.yaml``), which the fleet-only
+rules are not; :data:`FLEET_AGENT_NAMES` lists the agents that take the fleet's observation.
 """
 
 from __future__ import annotations
@@ -21,7 +26,15 @@ from typing import Any
 
 import numpy as np
 
-from evcd.agents.base import Agent, EpisodeState, Transition, observation_units, split_observation
+from evcd.agents.base import (
+    OBSERVATION_LAYOUTS,
+    Agent,
+    EpisodeState,
+    Transition,
+    observation_blocks,
+    observation_units,
+    split_observation,
+)
 
 #: Agent name -> (``module:Class``, the constructor arguments that name implies).
 _REGISTRY: dict[str, tuple[str, dict[str, Any]]] = {
@@ -30,8 +43,15 @@ _REGISTRY: dict[str, tuple[str, dict[str, Any]]] = {
     "queue_aware": ("evcd.agents.heuristics:QueueAwareAgent", {}),
     "dqn": ("evcd.agents.dqn:DQNAgent", {"double": False, "dueling": False}),
     "dueling_ddqn": ("evcd.agents.dqn:DQNAgent", {"double": True, "dueling": True}),
+    "reservation": ("evcd.agents.fleet_rules:ReservationAgent", {}),
+    "central": ("evcd.agents.fleet_rules:CentralAgent", {}),
 }
-AGENT_NAMES: tuple[str, ...] = tuple(_REGISTRY)
+#: The registered agents that read only the fleet's observation ``[D, N, Z, H]``.
+_FLEET_ONLY: tuple[str, ...] = ("reservation", "central")
+#: The dispatchers of the single environment (``[D, N, Z]``; each has ``conf/agent/<name>.yaml``).
+AGENT_NAMES: tuple[str, ...] = tuple(name for name in _REGISTRY if name not in _FLEET_ONLY)
+#: The agents that take the fleet's observation ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`).
+FLEET_AGENT_NAMES: tuple[str, ...] = ("random", "greedy", "queue_aware", *_FLEET_ONLY)
 
 
 def agent_class(name: str) -> type[Agent]:
@@ -41,7 +61,7 @@ def agent_class(name: str) -> type[Agent]:
         ValueError: ``name`` is not registered (the message lists the registered names).
     """
     if name not in _REGISTRY:
-        raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(AGENT_NAMES)}")
+        raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(_REGISTRY)}")
     module, _, cls_name = _REGISTRY[name][0].partition(":")
     return getattr(importlib.import_module(module), cls_name)
 
@@ -80,6 +100,8 @@ def make_agent_for_env(name: str, env: Any, rng: np.random.Generator, **kwargs: 
 
 __all__ = [
     "AGENT_NAMES",
+    "FLEET_AGENT_NAMES",
+    "OBSERVATION_LAYOUTS",
     "Agent",
     "EpisodeState",
     "Transition",
@@ -87,6 +109,7 @@ __all__ = [
     "agent_defaults",
     "make_agent",
     "make_agent_for_env",
+    "observation_blocks",
     "observation_units",
     "split_observation",
 ]

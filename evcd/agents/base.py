@@ -1,11 +1,12 @@
 """The agent interface shared by the dispatchers: heuristics and learning agents (DQN).
 
-An agent maps the environment's observation ``[D, N, Z]`` (see :mod:`evcd.env.observation`) to a
-station index. It acts in one way, :meth:`Agent.decide`: the observations of ``k`` episodes due at
-the same time and each episode's state (:meth:`Agent.new_episode`: its generator, and what the agent
-keeps per episode, such as a station drawn at departure), so that one agent can drive several
-episodes at once (the batched engine) and one network forward pass serves them all. For one episode
-at a time, as with a Gymnasium environment:
+An agent maps the environment's observation ``[D, N, Z]`` (see :mod:`evcd.env.observation`), or the
+fleet's ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`), to a station index. It acts in one way,
+:meth:`Agent.decide`: the observations of ``k`` episodes due at the same time and each episode's
+state (:meth:`Agent.new_episode`: its generator, and what the agent keeps per episode, such as a
+station drawn at departure), so that one agent can drive several episodes at once (the batched
+engine, or every guided EV of a fleet at one tick) and one network forward pass serves them all. For
+one episode at a time, as with a Gymnasium environment:
 
     agent.begin_episode(rng)              # after env.reset(): a new episode state
     action = agent.act(obs, explore)      # once per decision slot: decide() on that one episode
@@ -28,22 +29,62 @@ import numpy as np
 from evcd.env.transition import Transition
 from evcd.utils.validation import check_int
 
+#: The observation layouts, by number of length-``m`` blocks: the single environment's ``[D, N, Z]``
+#: (:mod:`evcd.env.observation`) and the fleet's ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`; ``H``: the
+#: other guided EVs heading to each station).
+OBSERVATION_LAYOUTS: dict[int, str] = {3: "[D, N, Z]", 4: "[D, N, Z, H]"}
 
-def split_observation(obs: np.ndarray, n_stations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(D, N, Z)``: the three length-``n_stations`` parts of an observation vector (or, for a
-    batch ``(k, 3m)``, of each row: arrays ``(k, m)``).
+
+def _check_blocks(blocks: int) -> int:
+    if isinstance(blocks, bool) or blocks not in OBSERVATION_LAYOUTS:
+        raise ValueError(f"blocks={blocks!r}: must be 3 ([D, N, Z]) or 4 ([D, N, Z, H])")
+    return int(blocks)
+
+
+def split_observation(obs: np.ndarray, n_stations: int, blocks: int = 3) -> tuple[np.ndarray, ...]:
+    """The ``blocks`` length-``n_stations`` parts of an observation vector (or, for a batch
+    ``(k, blocks * m)``, of each row: arrays ``(k, m)``): ``(D, N, Z)`` for 3 blocks (the single
+    environment), ``(D, N, Z, H)`` for 4 (the fleet).
 
     Raises:
-        ValueError: ``obs`` is not ``(3 * n_stations,)`` or ``(k, 3 * n_stations)``.
+        ValueError: ``obs`` is not ``(blocks * n_stations,)`` or ``(k, blocks * n_stations)``, or
+            ``blocks`` is not 3 or 4.
     """
+    blocks = _check_blocks(blocks)
     vec = np.asarray(obs)
-    if vec.ndim not in (1, 2) or vec.shape[-1] != 3 * n_stations:
+    size = blocks * n_stations
+    if vec.ndim not in (1, 2) or vec.shape[-1] != size:
         raise ValueError(
-            f"observation of shape {vec.shape}: expected ({3 * n_stations},) = [D, N, Z] for "
+            f"observation of shape {vec.shape}: expected ({size},) = {OBSERVATION_LAYOUTS[blocks]} for "
             f"{n_stations} stations (or a batch of them)"
         )
     m = n_stations
-    return vec[..., :m], vec[..., m : 2 * m], vec[..., 2 * m :]
+    return tuple(vec[..., b * m : (b + 1) * m] for b in range(blocks))
+
+
+def observation_blocks(obs: np.ndarray, n_stations: int, accepted: Sequence[int] = (3, 4)) -> int:
+    """The number of blocks of ``obs`` (one vector or a batch ``(k, size)``), read off its size: 3 for
+    ``[D, N, Z]`` (``3 * n_stations``), 4 for ``[D, N, Z, H]`` (``4 * n_stations``).
+
+    Args:
+        obs: an observation or a batch of them.
+        n_stations: number of stations ``m``.
+        accepted: the block counts allowed (a subset of 3 and 4).
+
+    Raises:
+        ValueError: ``obs`` has none of the accepted shapes (the message names them).
+    """
+    vec = np.asarray(obs)
+    accepted = tuple(_check_blocks(b) for b in accepted)
+    if vec.ndim in (1, 2):
+        for blocks in accepted:
+            if vec.shape[-1] == blocks * n_stations:
+                return blocks
+    expected = " or ".join(f"({b * n_stations},) = {OBSERVATION_LAYOUTS[b]}" for b in accepted)
+    raise ValueError(
+        f"observation of shape {vec.shape}: expected {expected} for {n_stations} stations "
+        "(or a batch of them)"
+    )
 
 
 def observation_units(env: Any) -> dict[str, Any]:
@@ -71,12 +112,17 @@ class Agent(ABC):
             generator of their own draw from it.
 
     Subclasses set :attr:`name` (the registry key, see :func:`evcd.agents.make_agent`) and implement
-    :meth:`decide`; learning agents also override :meth:`observe`.
+    :meth:`decide`; learning agents also override :meth:`observe`. Agents that read the fleet's
+    observation set :attr:`obs_blocks`.
     """
 
     name: ClassVar[str]
     #: Whether the agent learns from :meth:`observe` (the trainer runs a training phase for it).
     learns: ClassVar[bool] = False
+    #: The observation layouts :meth:`decide` accepts, as block counts (:data:`OBSERVATION_LAYOUTS`):
+    #: 3, the single environment's ``[D, N, Z]``; 4, the fleet's ``[D, N, Z, H]``. Which one a call
+    #: holds is read off its size (:meth:`blocks_of`).
+    obs_blocks: ClassVar[tuple[int, ...]] = (3,)
 
     def __init__(self, n_stations: int, rng: np.random.Generator) -> None:
         self.n_stations = check_int("n_stations", n_stations, minimum=1)
@@ -104,10 +150,25 @@ class Agent(ABC):
 
     @classmethod
     def from_env(cls, env: Any, rng: np.random.Generator, **kwargs: Any) -> Self:
-        """This agent for ``env`` (its number of stations and :meth:`env_kwargs`), plus ``kwargs``."""
-        return cls(int(env.action_space.n), rng, **{**cls.env_kwargs(env), **kwargs})
+        """This agent for ``env`` (its number of stations and :meth:`env_kwargs`), plus ``kwargs``.
+
+        ``env`` is a Gymnasium environment or a PettingZoo one (the fleet: ``action_space(agent)``, the
+        same ``Discrete(m)`` for every agent).
+        """
+        space = env.action_space
+        if callable(space):  # PettingZoo: one space per agent
+            space = space(env.possible_agents[0])
+        return cls(int(space.n), rng, **{**cls.env_kwargs(env), **kwargs})
 
     # ------------------------------------------------------------------ acting
+    def blocks_of(self, obs: np.ndarray) -> int:
+        """The number of blocks of ``obs`` (one observation or a batch), one of :attr:`obs_blocks`.
+
+        Raises:
+            ValueError: ``obs`` has none of the accepted shapes (the message names them).
+        """
+        return observation_blocks(obs, self.n_stations, self.obs_blocks)
+
     def new_episode(self, rng: np.random.Generator) -> EpisodeState:
         """The state of a new episode drawing from ``rng`` (the episode's own generator, so that an
         episode does not depend on the ones played before it)."""
@@ -118,7 +179,9 @@ class Agent(ABC):
         """The stations for ``k`` episodes due at the same time.
 
         Args:
-            obs: their observations ``[D, N, Z]``, shape ``(k, 3m)``.
+            obs: their observations, shape ``(k, 3m)`` (``[D, N, Z]``) or, for agents whose
+                :attr:`obs_blocks` has 4, ``(k, 4m)`` (``[D, N, Z, H]``, the guided EVs of a fleet
+                deciding at one tick, in the env's agent order).
             episodes: each episode's state (from :meth:`new_episode`), updated in place.
             explore: whether a learning agent may explore (training); rules ignore it.
 

@@ -1,10 +1,14 @@
 """Rule-based dispatchers: the paper's Random and Greedy baselines, a queue-aware heuristic, and the
 fixed-station policies (the building blocks of the best station in hindsight, :mod:`evcd.loops.hindsight`).
 
-All of them read the observation ``[D, N, Z]`` of :mod:`evcd.env.observation`. Normalisation
-(``normalize_obs=True``) divides ``D`` by a constant (m -> km), so Greedy's argmin is the same with or
-without it; the queue-aware heuristic reads the observation in physical units (it is told the
-environment's charging points and whether it normalises).
+All of them read the observation ``[D, N, Z]`` of :mod:`evcd.env.observation`, and take the fleet's
+``[D, N, Z, H]`` (:mod:`evcd.env.fleet`) too, ignoring ``H``: which layout a call holds is read off
+its size (:meth:`~evcd.agents.base.Agent.blocks_of`). On a fleet they decide every guided EV on its
+own, so the queue-aware rule sends EVs that see the same short queue to it together (it herds; the
+rules of :mod:`evcd.agents.fleet_rules` count ``H``). Normalisation (``normalize_obs=True``) divides
+``D`` by a constant (m -> km), so Greedy's argmin is the same with or without it; the queue-aware
+heuristic reads the observation in physical units (it is told the environment's charging points and
+whether it normalises).
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ class RandomAgent(Agent):
     it for the whole episode (the paper's Random baseline)."""
 
     name = "random"
+    obs_blocks = (3, 4)
 
     def new_episode(self, rng: np.random.Generator) -> RandomEpisode:
         """An episode whose station is not drawn yet."""
@@ -39,7 +44,7 @@ class RandomAgent(Agent):
 
     def decide(self, obs: np.ndarray, episodes: Sequence[RandomEpisode], explore: bool = False) -> np.ndarray:
         """Each episode's station, drawn from its generator at its first decision."""
-        split_observation(obs, self.n_stations)  # a wrong-sized observation is a wiring bug: fail
+        self.blocks_of(obs)  # a wrong-sized observation is a wiring bug: fail
         for episode in episodes:
             if episode.station is None:
                 episode.station = int(episode.rng.integers(self.n_stations))
@@ -53,10 +58,11 @@ class GreedyAgent(Agent):
     """
 
     name = "greedy"
+    obs_blocks = (3, 4)
 
     def decide(self, obs: np.ndarray, episodes: Sequence[EpisodeState], explore: bool = False) -> np.ndarray:
         """``argmin D`` of each observation."""
-        distance, _, _ = split_observation(obs, self.n_stations)
+        distance = split_observation(obs, self.n_stations, self.blocks_of(obs))[0]
         return np.argmin(distance, axis=-1).astype(np.int64)
 
 
@@ -73,7 +79,8 @@ class QueueAwareAgent(Agent):
       expected wait is ``max(0, b - t)``.
 
     Score ``t + max(0, b - t) = max(t, b)``; ties go to the lowest index. A station whose car park
-    the target is in (``D == 0``) counts the target in its ``Z``, so it is discounted there.
+    the target is in (``D == 0``) counts the target in its ``Z``, so it is discounted there. On the
+    fleet's observation ``H`` is ignored (:class:`~evcd.agents.fleet_rules.ReservationAgent` counts it).
 
     Args:
         n_stations: number of stations.
@@ -87,6 +94,7 @@ class QueueAwareAgent(Agent):
     """
 
     name = "queue_aware"
+    obs_blocks = (3, 4)
 
     def __init__(
         self,
@@ -115,15 +123,34 @@ class QueueAwareAgent(Agent):
         """The env's charging points per station and whether it normalises observations."""
         return observation_units(env)
 
+    def read(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(D, N, Z, H)`` of ``obs`` (one observation or a batch) in metres and vehicles (float64):
+        ``Z`` in whole vehicles without the target (where ``D == 0``, it waits there and counts
+        itself), ``H`` in whole vehicles, ``None`` for a 3-block observation.
+
+        Raises:
+            ValueError: ``obs`` has none of the shapes of :attr:`obs_blocks` (the message names them).
+        """
+        blocks = self.blocks_of(obs)
+        physical = to_physical(obs, self.points, self.normalized, blocks)
+        parts = split_observation(physical, self.n_stations, blocks)
+        d, n, z = parts[:3]
+        z = np.rint(z) - (d == 0.0)  # the target itself is counted in Z where it waits
+        h = np.rint(parts[3]) if blocks == 4 else None
+        return d, n, z, h
+
+    def score(self, d: np.ndarray, n: np.ndarray, ahead: np.ndarray) -> np.ndarray:
+        """Estimated seconds to the start of charging, ``max(t, b)`` (see the class), from the
+        physical ``D`` and ``N`` and the vehicles ``ahead`` of the target at each station (its
+        backlog counts them instead of ``Z``)."""
+        drive = d / self.speed_mps + n * self.vehicle_delay_s
+        backlog = np.maximum(0.0, ahead - self.points + 1.0) * self.charge_s / self.points
+        return np.maximum(drive, backlog)
+
     def estimate(self, obs: np.ndarray) -> np.ndarray:
         """Estimated seconds to the start of charging at each station (of each row of a batch)."""
-        split_observation(obs, self.n_stations)
-        physical = to_physical(obs, self.points, self.normalized)
-        d, n, z = split_observation(physical, self.n_stations)
-        z = np.rint(z) - (d == 0.0)  # the target itself is counted in Z where it waits
-        drive = d / self.speed_mps + n * self.vehicle_delay_s
-        backlog = np.maximum(0.0, z - self.points + 1.0) * self.charge_s / self.points
-        return np.maximum(drive, backlog)
+        d, n, z, _ = self.read(obs)
+        return self.score(d, n, z)
 
     def decide(self, obs: np.ndarray, episodes: Sequence[EpisodeState], explore: bool = False) -> np.ndarray:
         """The station with the smallest :meth:`estimate`, per observation."""
@@ -141,6 +168,7 @@ class FixedStationAgent(Agent):
     """
 
     name = "fixed"
+    obs_blocks = (3, 4)
 
     def __init__(self, n_stations: int, rng: np.random.Generator, station: int = 0) -> None:
         super().__init__(n_stations, rng)
@@ -148,5 +176,5 @@ class FixedStationAgent(Agent):
 
     def decide(self, obs: np.ndarray, episodes: Sequence[EpisodeState], explore: bool = False) -> np.ndarray:
         """The fixed station, for every episode."""
-        split_observation(obs, self.n_stations)
+        self.blocks_of(obs)
         return np.full(len(episodes), self.station, dtype=np.int64)

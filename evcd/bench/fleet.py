@@ -15,27 +15,12 @@ from typing import Any
 
 import numpy as np
 
+from evcd.agents.heuristics import GreedyAgent
 from evcd.env.fleet import FleetEnv
 from evcd.loops.fleet import play_fleet
 from evcd.loops.seeds import episode_spec
 
 log = logging.getLogger(__name__)
-
-
-class _Greedy:
-    """Nearest station by road for every guided EV (no agents import: the bench's own rule)."""
-
-    name = "greedy"
-
-    def new_episode(self, rng: np.random.Generator) -> None:
-        return None
-
-    def decide(self, obs: np.ndarray, episodes: Any, explore: bool = False) -> np.ndarray:
-        m = obs.shape[-1] // 4
-        return np.argmin(obs[:, :m], axis=-1)
-
-    def observe(self, *args: Any) -> None:
-        return None
 
 
 def fleet_overhead(env_kwargs: Mapping[str, Any], episodes: int = 3, seed: int = 0) -> dict[str, Any]:
@@ -54,11 +39,12 @@ def fleet_overhead(env_kwargs: Mapping[str, Any], episodes: int = 3, seed: int =
         for i in range(episodes):
             spec = episode_spec(seed, i)
             t0 = wallclock.perf_counter()
-            ep = play_fleet(env, _Greedy(), spec)
+            ep = play_fleet(env, GreedyAgent(len(env.stations), np.random.default_rng(seed)), spec)
             fleet = wallclock.perf_counter() - t0
             end = ep.trace[-1][0]
             sim = env.simulation
             t0 = wallclock.perf_counter()
+            sim.close()  # as the fleet's reset: a fresh SUMO from the snapshot
             sim.start_at(env.day, env.config.departure_window[0])
             sim.driver.step(until=end)
             alone = wallclock.perf_counter() - t0

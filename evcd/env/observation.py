@@ -54,14 +54,17 @@ class Observation:
     vector: np.ndarray  # float32 [D, N, Z], normalised if asked
 
 
-def unit_divisors(points: Sequence[int] | np.ndarray) -> np.ndarray:
+def unit_divisors(points: Sequence[int] | np.ndarray, blocks: int = 3) -> np.ndarray:
     """What normalisation divides ``[D, N, Z]`` by (float64, length ``3m``): :data:`D_SCALE_M` (m -> km),
     :data:`N_SCALE` (tens of vehicles) and each station's charging points (``Z`` in multiples of them).
-    The one definition of the scaled units: the environment's normalisation and the agents' reading of
-    observations both use it."""
+    With ``blocks=4``, the fleet's ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`): ``H`` in multiples of the
+    points too. The one definition of the scaled units: the environments' normalisation and the
+    agents' reading of observations both use it."""
+    if blocks not in (3, 4):
+        raise ValueError(f"blocks={blocks!r}: must be 3 ([D, N, Z]) or 4 ([D, N, Z, H])")
     pts = np.asarray(points, dtype=np.float64)
     m = pts.size
-    return np.concatenate([np.full(m, D_SCALE_M), np.full(m, N_SCALE), pts])
+    return np.concatenate([np.full(m, D_SCALE_M), np.full(m, N_SCALE), *([pts] * (blocks - 2))])
 
 
 def to_vector(
@@ -78,11 +81,13 @@ def to_vector(
     return raw.astype(np.float32)
 
 
-def to_physical(obs: np.ndarray, points: Sequence[int] | np.ndarray, normalized: bool) -> np.ndarray:
-    """Observation vectors (one ``(3m,)`` or a batch ``(k, 3m)``) in metres and vehicles (float64),
-    whether the environment normalised them (``normalized``) or not."""
+def to_physical(
+    obs: np.ndarray, points: Sequence[int] | np.ndarray, normalized: bool, blocks: int = 3
+) -> np.ndarray:
+    """Observation vectors (one ``(blocks * m,)`` or a batch) in metres and vehicles (float64),
+    whether the environment normalised them (``normalized``) or not; ``blocks=4`` for the fleet's."""
     x = np.asarray(obs).astype(np.float64)
-    return x * unit_divisors(points) if normalized else x
+    return x * unit_divisors(points, blocks) if normalized else x
 
 
 def observation_bounds(stations: Sequence[Station], normalize: bool) -> tuple[np.ndarray, np.ndarray]:

@@ -164,6 +164,7 @@ def test_h_counts_the_other_guided_evs_heading_to_each_station(make_small_fleet)
 def test_same_seed_same_episode_and_the_share_draws_the_guided(make_fleet) -> None:
     env = make_fleet(guided_share=0.5)
     a = play(env, 3, greedy)
+    play(env, 3, lambda agent, obs, info: 2)  # another dispatcher in between: the next does not see it
     b = play(env, 3, greedy)
     c = play(env, 4, greedy)
     assert a["infos"] == b["infos"] and a["returns"] == b["returns"]

@@ -52,7 +52,7 @@ from evcd.env.fleet.events import advance, heading
 from evcd.env.fleet.guided import GuidedEV, Stage
 from evcd.env.fleet.measures import FleetMeasures, measure
 from evcd.env.fleet.trips import ChargingTrip, draw_guided, in_window, read_charging_trips
-from evcd.env.observation import MAX_VEHICLES, Observation, RouteObserver, observation_bounds
+from evcd.env.observation import MAX_VEHICLES, Observation, RouteObserver, observation_bounds, unit_divisors
 from evcd.env.reward import Slot, reward_fn
 from evcd.env.simulation import EpisodeSimulation
 from evcd.env.target import Target
@@ -133,9 +133,9 @@ class FleetEnv(ParallelEnv):
         )
         self._reward = reward_fn(cfg.reward)
         m = len(self.stations)
-        self._points = np.array([st.points for st in self.stations], dtype=np.float64)
+        self._h_units = unit_divisors([st.points for st in self.stations], blocks=4)[3 * m :]
         _, high = observation_bounds(self.stations, cfg.normalize_obs)
-        h_high = np.full(m, MAX_VEHICLES) / (self._points if normalize_obs else 1.0)
+        h_high = np.full(m, MAX_VEHICLES) / (self._h_units if normalize_obs else 1.0)
         high = np.concatenate([high, h_high]).astype(np.float32)
         self._obs_space = gymnasium.spaces.Box(np.zeros(4 * m, dtype=np.float32), high, dtype=np.float32)
         self._act_space = gymnasium.spaces.Discrete(m)
@@ -217,6 +217,10 @@ class FleetEnv(ParallelEnv):
         self._ended = False
         sim = self.simulation
         start = self.config.departure_window[0]
+        # a fresh SUMO per episode: after loadState into a simulation that ran other vehicles, SUMO
+        # keeps traces of them (a fleet run after three others teleported five EVs a fresh run did
+        # not), and an episode must not depend on the ones before it
+        sim.close()
         sim.start_at(day, start)
         present = set(sim.api.vehicle.getIDList())
         for ev in self.guided.values():
@@ -408,7 +412,7 @@ class FleetEnv(ParallelEnv):
             h = counts.copy()
             if driving.get(agent):
                 h[ev.station] -= 1
-            h_vec = h / self._points if self.config.normalize_obs else h.astype(np.float64)
+            h_vec = h / self._h_units if self.config.normalize_obs else h.astype(np.float64)
             vector = np.concatenate([obs.vector, h_vec.astype(np.float32)])
             ev.obs = Observation(obs.distance, obs.vehicles, obs.occupancy, obs.routes, vector)
 
