@@ -4,10 +4,14 @@
     python scripts/evaluate.py -m agent=random,greedy,queue_aware evs=200,300,400 seed=0,1,2
     python scripts/evaluate.py agent=random env.departure_window=[25200,32400]   # morning only
     python scripts/evaluate.py agent=dueling_ddqn agent.checkpoint=outputs/train/<run>   # a trained policy
+    python scripts/evaluate.py task=fleet agent=central evs=400 fleet.guided_share=0.5   # the fleet
 
 Writes ``episodes.csv`` (one row per episode) and ``results.json`` (summary, rows, config) into the
 Hydra run directory and logs the summary: mean, median and 95% bootstrap interval of the mean
-travel time over the episodes that ended charging, and how many were truncated.
+travel time over the episodes that ended charging, and how many were truncated. With ``task=fleet``
+(docs/FLEET.md) every episode guides many EVs at once: ``fleet_episodes.csv`` (the measures of each
+episode), ``results.json`` and ``fleet_trace.png`` (the first episode's queues and guided EVs heading to
+each station).
 """
 
 from __future__ import annotations
@@ -22,25 +26,40 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
+from evcd.agents import make_agent_for_env
 from evcd.agents.dqn import checkpoint_agent_config
 from evcd.cli.errors import stop_on_bad_setting
-from evcd.cli.params import agent_params, env_kwargs
+from evcd.cli.params import agent_params, env_kwargs, fleet_kwargs
 from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
+from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.loops.evaluate import evaluate
+from evcd.loops.fleet import check_fleet_dispatcher, evaluate_fleet
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
-from evcd.loops.run_files import EVAL_CSV, RESULTS_JSON, write_episodes_csv, write_results_json
+from evcd.loops.run_files import (
+    EVAL_CSV,
+    RESULTS_JSON,
+    write_episodes_csv,
+    write_fleet_files,
+    write_results_json,
+)
 from evcd.loops.seeds import agent_rng
+from evcd.report.fleet_figure import plot_fleet_traces
 from evcd.report.scenario import format_table
 from evcd.utils.checkpoint import CheckpointError
 from evcd.utils.validation import check_int
 
 log = logging.getLogger("evaluate")
 
+FLEET_CSV = "fleet_episodes.csv"
+FLEET_PNG = "fleet_trace.png"
+
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     """Evaluate the agent described by ``cfg``; write its files into ``out_dir``; return the summary."""
+    if cfg.task == "fleet":
+        return run_fleet(cfg, out_dir)
     # every check before SUMO starts
     episodes = check_int("episodes", cfg.episodes, minimum=1)
     seed = check_int("seed", cfg.seed, minimum=0)
@@ -80,6 +99,47 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     )  # fmt: skip
     log.info("wrote %s and %s", *files)
     return dataclasses.asdict(s)
+
+
+def run_fleet(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
+    """``task=fleet``: play fleet episodes with one dispatcher for every guided EV; write
+    ``fleet_episodes.csv``, ``results.json`` and ``fleet_trace.png`` into ``out_dir``."""
+    episodes = check_int("episodes", cfg.episodes, minimum=1)
+    seed = check_int("seed", cfg.seed, minimum=0)
+    resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
+    params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
+    name = check_fleet_dispatcher(params.pop("name"))
+    files = [out_dir / FLEET_CSV, out_dir / RESULTS_JSON, out_dir / FLEET_PNG]
+    for path in files:
+        if path.exists():
+            raise FileExistsError(f"{path} exists: evaluate into a fresh run directory")
+    env = FleetEnv(**fleet_kwargs(cfg))  # validates every value; loads the scenario, no SUMO
+    env.check_days()  # every day has EVs to guide (its routes, no SUMO)
+    agent = make_agent_for_env(name, env, agent_rng(seed), **params)
+    log.info("fleet: %s on %s, evs=%s, guided_share %s, %d episodes, seed %d", agent, env.scenario.root,
+             cfg.evs, env.guided_share, episodes, seed)  # fmt: skip
+    try:
+        env.prepare()
+        played, summary = evaluate_fleet(env, agent, episodes, seed, progress=bool(cfg.progress),
+                                         resamples=resamples)  # fmt: skip
+    finally:
+        env.close()
+    rows = [ep.row() for ep in played]
+    write_fleet_files(rows, summary, files[0], files[1], OmegaConf.to_container(cfg, resolve=True))
+    title = (
+        f"{name}, evs={cfg.evs}, guided_share {env.guided_share}, seed {seed}, day {played[0].day}, episode 0"
+    )
+    plot_fleet_traces({name: played[0].trace}, [st.id for st in env.stations], files[2], title=title)
+    log.info("episodes:\n%s", format_table(rows, "{:.1f}"))
+    log.info(
+        "fleet %s, evs=%s, guided_share %s, seed %d: guided EVs %.1f s (95%% CI %.1f-%.1f), all EVs %.1f s, "
+        "herding %.2f, %d of %d guided EVs truncated; %.1f s per episode",
+        name, cfg.evs, env.guided_share, seed, summary["guided_travel"], *summary["guided_travel_ci"],
+        summary["all_travel"], summary["herding"], summary["truncated"], summary["guided"],
+        summary["mean_wall_s"],
+    )  # fmt: skip
+    log.info("wrote %s, %s and %s", *files)
+    return {**summary, "mean_travel_time": summary["guided_travel"]}
 
 
 def _brief(row: Any) -> dict[str, Any]:

@@ -153,11 +153,11 @@ class Agent(ABC):
         """This agent for ``env`` (its number of stations and :meth:`env_kwargs`), plus ``kwargs``.
 
         ``env`` is a Gymnasium environment or a PettingZoo one (the fleet: ``action_space(agent)``, the
-        same ``Discrete(m)`` for every agent).
+        same ``Discrete(m)`` for every agent, asked for its first possible agent, or ``None``).
         """
         space = env.action_space
         if callable(space):  # PettingZoo: one space per agent
-            space = space(env.possible_agents[0])
+            space = space(next(iter(env.possible_agents), None))
         return cls(int(space.n), rng, **{**cls.env_kwargs(env), **kwargs})
 
     # ------------------------------------------------------------------ acting

@@ -60,6 +60,25 @@ def env_kwargs(cfg: DictConfig) -> dict[str, Any]:
     return kwargs
 
 
+def fleet_kwargs(cfg: DictConfig) -> dict[str, Any]:
+    """Keyword arguments of :class:`~evcd.env.fleet.FleetEnv` (``task=fleet``): :func:`env_kwargs`
+    without the single environment's protocol options, plus ``fleet.guided_share``.
+
+    Raises:
+        ValueError: a single-target-only setting (``env.protocol=paper``, ``env.gui=true``), or a
+            demand value out of range.
+    """
+    kwargs = env_kwargs(cfg)
+    if kwargs.pop("protocol") != "fast":
+        raise ValueError("env.protocol=paper is for the single target (task=single): the fleet runs from "
+                         "the day's snapshots (protocol fast)")  # fmt: skip
+    if kwargs.pop("gui"):
+        raise ValueError("env.gui=true is for the single target (task=single): the fleet runs headless")
+    kwargs.pop("day_end")  # the paper protocol's
+    kwargs["guided_share"] = OmegaConf.select(cfg, "fleet.guided_share")
+    return kwargs
+
+
 def agent_params(cfg: DictConfig) -> tuple[str, dict[str, Any]]:
     """The dispatcher's name and constructor arguments from ``agent``; a learning agent also gets
     ``config``, the :class:`~evcd.agents.dqn_config.DQNConfig` of the top-level ``learner`` block.

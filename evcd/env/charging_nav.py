@@ -15,7 +15,6 @@ stuck, or exceeds ``max_travel_time``, or SUMO reports an error; ``info["reason"
 from __future__ import annotations
 
 import logging
-import numbers
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -31,6 +30,7 @@ from evcd.env.episode_rules import (
     TIME_EPS,
     Motion,
     another_origin,
+    check_action,
     final_info,
     slot_deadline,
     slot_end_reason,
@@ -232,7 +232,7 @@ class ChargingNavEnv(gymnasium.Env):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Drive to station ``action`` for one slot (or until the target starts charging)."""
-        index = self._check_action(action)
+        index = check_action(action, len(self.stations))
         ep = self._episode
         if ep is None or ep.done:
             raise RuntimeError("the episode is over (or never began): call reset()")
@@ -344,13 +344,6 @@ class ChargingNavEnv(gymnasium.Env):
     @cached_property
     def _station_index(self) -> dict[str, int]:
         return {st.id: i for i, st in enumerate(self.stations)}
-
-    def _check_action(self, action: Any) -> int:
-        m = len(self.stations)
-        value = action.item() if isinstance(action, np.ndarray) and action.ndim == 0 else action
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= value < m:
-            raise ValueError(f"action={action!r}: must be a station index in [0, {m})")
-        return int(value)
 
     def _override(self, day: int, plan: TargetPlan, options: dict[str, Any]) -> tuple[int, TargetPlan]:
         cfg = self.config

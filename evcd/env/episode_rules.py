@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -144,3 +145,15 @@ def _wait_end(record: ChargeRecord, now: float) -> float:
     if record.start_time is not None:
         return record.start_time
     return record.release_time if record.release_time is not None else now
+
+
+def check_action(action: Any, n_stations: int, name: str = "action") -> int:
+    """``action`` as a station index (a Python or NumPy integer, or a 0-d array, in ``[0, m)``).
+
+    Raises:
+        ValueError: ``"<name>=<action>: must be a station index in [0, m)"``.
+    """
+    value = action.item() if isinstance(action, np.ndarray) and action.ndim == 0 else action
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= value < n_stations:
+        raise ValueError(f"{name}={action!r}: must be a station index in [0, {n_stations})")
+    return int(value)

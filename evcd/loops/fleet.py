@@ -12,16 +12,21 @@ Seeds: the episode's ``EpisodeSpec`` gives the ``reset`` seed (day and guided EV
 
 from __future__ import annotations
 
+import math
 import time as wallclock
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
+from evcd.agents import FLEET_AGENT_NAMES
 from evcd.env.fleet import FleetEnv
 from evcd.env.fleet.measures import FleetMeasures
 from evcd.env.runners.base import EpisodeSpec, Policy
 from evcd.env.transition import Transition
+from evcd.loops.seeds import bootstrap_rng, episode_spec
+from evcd.loops.stats import bootstrap_ci
 
 
 @dataclass
@@ -99,3 +104,50 @@ def play_fleet(
     day = env.days[env.day].demand_seed if env.day is not None else -1
     return FleetEpisode(spec.index, day, env.measures(), returns, transitions,
                         wallclock.perf_counter() - t0, list(env.trace))  # fmt: skip
+
+
+#: The dispatchers the fleet takes (the rules reading ``[D, N, Z]`` or ``[D, N, Z, H]``).
+FLEET_DISPATCHERS: tuple[str, ...] = FLEET_AGENT_NAMES
+
+
+def check_fleet_dispatcher(name: Any) -> str:
+    """``name`` if the fleet can be given it.
+
+    Raises:
+        ValueError: not a fleet dispatcher (the message lists them).
+    """
+    if name not in FLEET_DISPATCHERS:
+        raise ValueError(
+            f"agent {name!r} is not a fleet dispatcher (task=fleet); "
+            f"the fleet takes: {', '.join(FLEET_DISPATCHERS)}"
+        )
+    return str(name)
+
+
+def evaluate_fleet(
+    env: FleetEnv, agent: Policy, episodes: int, seed: int, *, progress: bool = True, resamples: int = 10_000
+) -> tuple[list[FleetEpisode], dict[str, Any]]:
+    """Play ``episodes`` fleet episodes (evaluation stream of ``seed``, no exploration); return them and
+    their summary: per measure the mean over episodes, and for the guided and all-EV travel times the
+    95 % bootstrap interval of the mean over episodes (each episode's mean is one value)."""
+    played: list[FleetEpisode] = []
+    with tqdm(
+        total=episodes, desc=f"fleet {getattr(agent, 'name', '')}", unit="ep", disable=not progress
+    ) as bar:
+        for i in range(episodes):
+            played.append(play_fleet(env, agent, episode_spec(seed, i)))
+            bar.update(1)
+    rng = bootstrap_rng(seed)
+    summary: dict[str, Any] = {"episodes": episodes, "seed": seed}
+    for key in ("guided_travel", "all_travel", "queue_wait", "herding"):
+        values = np.array([getattr(ep.measures, key) for ep in played], dtype=np.float64)
+        finite = values[np.isfinite(values)]
+        summary[key] = float(finite.mean()) if finite.size else math.nan
+        if key in ("guided_travel", "all_travel"):
+            summary[f"{key}_ci"] = list(bootstrap_ci(finite, rng, resamples))
+    for key in ("guided", "truncated", "all_unfinished", "transitions"):
+        summary[key] = int(
+            sum(ep.transitions if key == "transitions" else getattr(ep.measures, key) for ep in played)
+        )
+    summary["mean_wall_s"] = float(np.mean([ep.wall_s for ep in played]))
+    return played, summary

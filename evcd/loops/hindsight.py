@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from evcd.agents import AGENT_NAMES, Agent, agent_class, make_agent_for_env
+from evcd.agents import AGENT_NAMES, FLEET_AGENT_NAMES, Agent, agent_class, make_agent_for_env
 from evcd.agents.heuristics import FixedStationAgent
 from evcd.env.runners import EpisodeRow, EpisodeRunner, EpisodeSpec
 from evcd.utils.validation import check_int
@@ -131,6 +131,8 @@ def check_dispatcher(name: Any) -> str:
     Raises:
         ValueError: an unknown name (the message lists the known ones).
     """
+    if name in FLEET_AGENT_NAMES and name not in DISPATCHERS:
+        raise ValueError(f"agent {name!r} reads the fleet's observation [D, N, Z, H]: use it with task=fleet")
     if name not in DISPATCHERS:
         raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(DISPATCHERS)}")
     return str(name)

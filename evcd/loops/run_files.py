@@ -114,3 +114,30 @@ def write_results_json(
     path = Path(path)
     refuse_clobber(path, overwrite)
     return atomic_write_json(path, results_dict(result, config))
+
+
+def write_fleet_files(
+    rows: Sequence[Mapping[str, Any]],
+    summary: Mapping[str, Any],
+    csv_path: str | Path,
+    json_path: str | Path,
+    config: Mapping[str, Any] | None = None,
+) -> tuple[Path, Path]:
+    """A fleet evaluation's files (``scripts/evaluate.py task=fleet``): one CSV row per fleet episode
+    (:meth:`~evcd.loops.fleet.FleetEpisode.row`) and ``results.json`` (summary, rows, config; strict
+    JSON), both atomically.
+
+    Raises:
+        FileExistsError: either file exists.
+    """
+    csv_path, json_path = Path(csv_path), Path(json_path)
+    for path in (csv_path, json_path):
+        refuse_clobber(path, overwrite=False)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else [], lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(csv_path, buf.getvalue())
+    payload = {"summary": dict(summary), "episodes": [dict(r) for r in rows], "config": config}
+    atomic_write_json(json_path, json_floats(payload))
+    return csv_path, json_path

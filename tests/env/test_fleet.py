@@ -92,7 +92,7 @@ def test_a_bad_action_names_the_agent_and_the_range(make_fleet) -> None:
     env = make_fleet()
     env.reset(seed=0)
     agent = env.agents[0]
-    with pytest.raises(ValueError, match=rf"action 7 of '{agent}': must be a station index in \[0, 3\)"):
+    with pytest.raises(ValueError, match=rf"actions\['{agent}'\]=7: must be a station index in \[0, 3\)"):
         env.step({agent: 7})
     with pytest.raises(ValueError, match="not an agent of this step"):
         env.step({"nobody": 0})

@@ -13,12 +13,19 @@ import pytest
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
-from evcd.cli.params import demand_config, env_kwargs
+from evcd.agents import make_agent_for_env
+from evcd.cli.params import demand_config, env_kwargs, fleet_kwargs
 from evcd.env import ChargingNavEnv
+from evcd.env.fleet import FleetEnv
+from evcd.loops.fleet import FLEET_DISPATCHERS
 from evcd.loops.hindsight import DISPATCHERS, make_dispatcher
 from evcd.loops.run_files import CSV_FIELDS
 from evcd.scenario.demand import DemandConfig
 from tests.conftest import CONF, compose_config, run_script
+
+#: A fleet on the script grid: enough charging EVs departing 06:00-07:00 to guide.
+FLEET = ["task=fleet", "evs=300", "scenario.demand.charging_share=0.6", "env.departure_window=[21600,25200]",
+         "episodes=1"]  # fmt: skip
 
 #: Set by the scenario group, the top-level `evs` or derived: not in conf/env.
 NOT_IN_ENV_GROUP = {"self", "scenario", "evs", "charging_points", "demand"}
@@ -67,7 +74,7 @@ def test_every_agent_config_builds_its_agent(scenario_dir):
     import numpy as np
 
     env = ChargingNavEnv(**env_kwargs(compose_evaluate(f"scenario.path={scenario_dir}")))  # no SUMO yet
-    assert set(DISPATCHERS) == {p.stem for p in (CONF / "agent").glob("*.yaml")}
+    assert set(DISPATCHERS) | set(FLEET_DISPATCHERS) == {p.stem for p in (CONF / "agent").glob("*.yaml")}
     for name in DISPATCHERS:
         params = OmegaConf.to_container(compose_evaluate(f"agent={name}").agent)
         assert params.pop("name") == name
@@ -154,3 +161,65 @@ def test_an_existing_results_file_is_not_overwritten(small, tmp_path):
     proc = run_evaluate(*small, "episodes=1", f"hydra.run.dir={out}")
     assert proc.returncode == 2 and "results.json exists" in proc.stdout + proc.stderr
     assert (out / "results.json").read_text() == "{}" and not (out / "episodes.csv").exists()
+
+
+# ---------------------------------------------------------------------------------------- task=fleet
+def test_the_fleet_task_composes_its_defaults_and_builds_every_fleet_rule(small):
+    import numpy as np
+
+    cfg = compose_evaluate("task=fleet")
+    assert cfg.task == "fleet" and cfg.episodes == 5 and cfg.fleet.guided_share == 1.0
+    assert list(cfg.env.departure_window) == [25200.0, 36000.0] and cfg.env.reward == "time"
+    assert compose_evaluate().task == "single"
+    cfg = compose_evaluate(*small, *FLEET, "fleet.guided_share=0.5")
+    env = FleetEnv(**fleet_kwargs(cfg))  # no SUMO
+    assert env.guided_share == 0.5 and env.config.departure_window == (21600.0, 25200.0)
+    for name in FLEET_DISPATCHERS:
+        params = OmegaConf.to_container(compose_evaluate(*small, *FLEET, f"agent={name}").agent)
+        assert params.pop("name") == name
+        assert make_agent_for_env(name, env, np.random.default_rng(0), **params).name == name
+
+
+def test_evaluate_a_fleet_end_to_end(small, tmp_path):
+    out = tmp_path / "run"
+    proc = run_evaluate(*small, *FLEET, "agent=reservation", "fleet.guided_share=0.5", f"hydra.run.dir={out}")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    with open(out / "fleet_episodes.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 1 and int(rows[0]["guided"]) >= 2
+    assert int(rows[0]["guided_charged"]) + int(rows[0]["truncated"]) == int(rows[0]["guided"])
+    data = json.loads((out / "results.json").read_text())
+    s = data["summary"]
+    assert s["guided_travel"] == pytest.approx(float(rows[0]["guided_travel"]))
+    assert data["config"]["task"] == "fleet" and data["config"]["fleet"]["guided_share"] == 0.5
+    assert (out / "fleet_trace.png").stat().st_size > 10_000
+    assert "guided EVs" in proc.stdout + proc.stderr
+
+
+@pytest.mark.parametrize(
+    "overrides,needle",
+    [
+        (["fleet.guided_share=0"], "guided_share=0"),
+        (["fleet.guided_share=1.5"], "guided_share=1.5"),
+        (["agent=hindsight"], "agent 'hindsight' is not a fleet dispatcher"),
+        (["agent=dueling_ddqn"], "agent 'dueling_ddqn' is not a fleet dispatcher"),
+        (["env.protocol=paper"], "env.protocol=paper is for the single target"),
+        (["env.departure_window=[3600,3660]"], "nothing to guide"),
+    ],
+)
+def test_bad_fleet_settings_stop_before_sumo(small, tmp_path, overrides, needle):
+    out = tmp_path / "run"
+    proc = run_evaluate(*small, *FLEET, *overrides, f"hydra.run.dir={out}")
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    log = proc.stdout + proc.stderr
+    assert needle in log
+    assert "simulating the day" not in log and not (out / "results.json").exists()
+
+
+def test_a_fleet_rule_on_the_single_task_is_refused(small, tmp_path):
+    proc = run_evaluate(*small, "agent=central", f"hydra.run.dir={tmp_path / 'run'}")
+    assert proc.returncode == 2
+    assert (
+        "agent 'central' reads the fleet's observation [D, N, Z, H]: use it with task=fleet"
+        in proc.stdout + proc.stderr
+    )

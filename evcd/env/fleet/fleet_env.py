@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import numbers
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -47,7 +46,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from evcd.env.config import EnvConfig
-from evcd.env.episode_rules import TIME_EPS, Motion, final_info, slot_end_reason, visits_of
+from evcd.env.episode_rules import TIME_EPS, Motion, check_action, slot_end_reason
 from evcd.env.fleet.events import advance, heading
 from evcd.env.fleet.guided import GuidedEV, Stage
 from evcd.env.fleet.measures import FleetMeasures, measure
@@ -184,9 +183,26 @@ class FleetEnv(ParallelEnv):
         return self._act_space
 
     def prepare(self) -> None:
-        """Build (or verify) every day's snapshots now instead of at the first reset."""
+        """Check that every day has EVs to guide, then build (or verify) every day's snapshots now
+        instead of at the first reset.
+
+        Raises:
+            ValueError: a day has no charging EV departing in the window (before SUMO starts).
+        """
+        self.check_days()
         for day in range(len(self.days)):
             self.simulation.prepare(day)
+
+    def check_days(self) -> None:
+        """Raise ``ValueError`` (no SUMO needed) if a day has no charging EV departing in the window."""
+        for day, trips in enumerate(self.candidates):
+            if not trips:
+                raise ValueError(self._nothing_to_guide(day))
+
+    def _nothing_to_guide(self, day: int) -> str:
+        lo, hi = self.config.departure_window
+        return (f"no charging EV of day {self.days[day].demand_seed} departs in departure_window="
+                f"[{lo:g}, {hi:g}) s: nothing to guide (widen the window or add EVs)")  # fmt: skip
 
     # ------------------------------------------------------------------ the API
     def reset(
@@ -206,11 +222,7 @@ class FleetEnv(ParallelEnv):
                 raise ValueError(f"options day={day}: must index demand_seeds (0..{len(self.days) - 1})")
         trips = draw_guided(self.candidates[day], self.guided_share, rng)
         if not trips:
-            lo, hi = self.config.departure_window
-            raise RuntimeError(
-                f"no charging EV of day {self.days[day].demand_seed} departs in the window "
-                f"[{lo:g}, {hi:g}) s: nothing to guide"
-            )
+            raise ValueError(self._nothing_to_guide(day))
         self.day = day
         self.guided = {trip.vehicle: GuidedEV(trip, trip.station) for trip in trips}
         self.agents = []
@@ -246,7 +258,7 @@ class FleetEnv(ParallelEnv):
             ev = self.guided.get(agent)
             if ev is None or ev.stage is not Stage.ACTIVE:
                 raise ValueError(f"actions for {agent!r}: not an agent of this step (agents: env.agents)")
-            index = self._check_action(agent, action)
+            index = check_action(action, len(self.stations), f"actions[{agent!r}]")
             ev.decisions += 1
             if index == ev.station:
                 continue
@@ -418,29 +430,10 @@ class FleetEnv(ParallelEnv):
 
     # ------------------------------------------------------------------ info and checks
     def _info(self, ev: GuidedEV) -> dict[str, Any]:
-        info: dict[str, Any] = {
-            "time": self.simulation.time if self.simulation.running else ev.end,
-            "station": ev.station,
-            "own_station": ev.trip.station,
-            "departure": ev.trip.depart,
-            "day": self.days[self.day].demand_seed if self.day is not None else None,
-        }
-        if ev.stage is Stage.DONE and ev.reason is not None and ev.end is not None:
-            records = self.simulation.controller.records if ev.reason != "sumo_error" else []
-            final = final_info(
-                reason=ev.reason, now=ev.end, departure=ev.trip.depart, origin=ev.origin,
-                travel=ev.travel_time, visits=visits_of(records, ev.vehicle, ev.end),
-                day=info["day"], switches=ev.switches, station=ev.station, stations=self.stations,
-            )  # fmt: skip
-            info.update(final)
-        return info
-
-    def _check_action(self, agent: str, action: Any) -> int:
-        m = len(self.stations)
-        value = action.item() if isinstance(action, np.ndarray) and action.ndim == 0 else action
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= value < m:
-            raise ValueError(f"action {action!r} of {agent!r}: must be a station index in [0, {m})")
-        return int(value)
+        sim = self.simulation
+        day = self.days[self.day].demand_seed if self.day is not None else None
+        records = sim.controller.records if ev.stage is Stage.DONE and ev.reason != "sumo_error" else []
+        return ev.info(sim.time if sim.running else ev.end, day, records, self.stations)
 
 
 def parallel_env(**kwargs: Any) -> FleetEnv:

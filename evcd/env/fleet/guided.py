@@ -13,14 +13,16 @@ from __future__ import annotations
 
 import enum
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from evcd.env.episode_rules import Motion
+from evcd.env.episode_rules import Motion, final_info, visits_of
 from evcd.env.fleet.trips import ChargingTrip
 from evcd.env.observation import Observation, RouteObserver
 from evcd.env.target import park_at
 from evcd.scenario.stations_file import Station
+from evcd.sim.charge_record import ChargeRecord
 from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SUMO_ERRORS
 
@@ -95,6 +97,22 @@ class GuidedEV:
     def finish(self, reason: str, now: float) -> None:
         """It is done (charging or truncated) at ``now``."""
         self.stage, self.reason, self.end = Stage.DONE, reason, now
+
+    def info(
+        self, now: float | None, day: int | None, records: Sequence[ChargeRecord], stations: Sequence[Station]
+    ) -> dict[str, Any]:
+        """Its ``info``: ``time``, ``station`` (current), ``own_station`` (its trip's), ``departure`` and
+        ``day``; once done, the episode rules' final keys (:func:`~evcd.env.episode_rules.final_info`,
+        its visits read from the controller's ``records``)."""
+        info: dict[str, Any] = {"time": now, "station": self.station, "own_station": self.trip.station,
+                                "departure": self.trip.depart, "day": day}  # fmt: skip
+        if self.stage is Stage.DONE and self.reason is not None and self.end is not None:
+            info |= final_info(
+                reason=self.reason, now=self.end, departure=self.trip.depart, origin=self.origin,
+                travel=self.travel_time, visits=visits_of(records, self.vehicle, self.end), day=day,
+                switches=self.switches, station=self.station, stations=stations,
+            )  # fmt: skip
+        return info
 
     def send(
         self,
