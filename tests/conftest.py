@@ -48,6 +48,17 @@ def _isolated_snapshot_cache(tmp_path_factory: pytest.TempPathFactory):
     patch.undo()
 
 
+@pytest.fixture
+def one_torch_thread() -> Iterator[None]:
+    """Small networks: one torch thread is faster and keeps the numbers independent of the machine."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 # ---------------------------------------------------------------------------------------- scenarios
 @dataclass(frozen=True)
 class SmallScenario:

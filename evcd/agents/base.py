@@ -35,9 +35,10 @@ from evcd.utils.validation import check_int
 OBSERVATION_LAYOUTS: dict[int, str] = {3: "[D, N, Z]", 4: "[D, N, Z, H]"}
 
 
-def _check_blocks(blocks: int) -> int:
+def check_blocks(blocks: Any, name: str = "blocks") -> int:
+    """``blocks`` if it is 3 (``[D, N, Z]``) or 4 (``[D, N, Z, H]``); else ``ValueError`` naming it."""
     if isinstance(blocks, bool) or blocks not in OBSERVATION_LAYOUTS:
-        raise ValueError(f"blocks={blocks!r}: must be 3 ([D, N, Z]) or 4 ([D, N, Z, H])")
+        raise ValueError(f"{name}={blocks!r}: must be 3 ([D, N, Z]) or 4 ([D, N, Z, H])")
     return int(blocks)
 
 
@@ -50,7 +51,7 @@ def split_observation(obs: np.ndarray, n_stations: int, blocks: int = 3) -> tupl
         ValueError: ``obs`` is not ``(blocks * n_stations,)`` or ``(k, blocks * n_stations)``, or
             ``blocks`` is not 3 or 4.
     """
-    blocks = _check_blocks(blocks)
+    blocks = check_blocks(blocks)
     vec = np.asarray(obs)
     size = blocks * n_stations
     if vec.ndim not in (1, 2) or vec.shape[-1] != size:
@@ -75,7 +76,7 @@ def observation_blocks(obs: np.ndarray, n_stations: int, accepted: Sequence[int]
         ValueError: ``obs`` has none of the accepted shapes (the message names them).
     """
     vec = np.asarray(obs)
-    accepted = tuple(_check_blocks(b) for b in accepted)
+    accepted = tuple(check_blocks(b) for b in accepted)
     if vec.ndim in (1, 2):
         for blocks in accepted:
             if vec.shape[-1] == blocks * n_stations:
@@ -93,6 +94,18 @@ def observation_units(env: Any) -> dict[str, Any]:
     normalises (:func:`evcd.env.observation.unit_divisors`)."""
     base = env.unwrapped
     return {"points": [st.points for st in base.stations], "normalized": bool(base.config.normalize_obs)}
+
+
+def observation_layout(env: Any) -> int:
+    """The number of blocks of ``env``'s observations: 3 (``[D, N, Z]``), or 4 for the fleet's
+    ``[D, N, Z, H]`` (a PettingZoo env: ``observation_space(agent)``); 3 for an object without an
+    observation space."""
+    space = getattr(env, "observation_space", None)
+    if space is None:
+        return 3
+    if callable(space):  # PettingZoo: one space per agent, the same for all
+        space = space(next(iter(env.possible_agents), None))
+    return int(space.shape[0]) // len(env.unwrapped.stations)
 
 
 @dataclass

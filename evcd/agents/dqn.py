@@ -39,7 +39,14 @@ import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812  (torch's convention)
 
-from evcd.agents.base import Agent, EpisodeState, Transition, observation_units
+from evcd.agents.base import (
+    Agent,
+    EpisodeState,
+    Transition,
+    check_blocks,
+    observation_layout,
+    observation_units,
+)
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
@@ -83,10 +90,12 @@ class DQNAgent(Agent):
             observation as given (for environments whose observations are already scaled).
         normalized: whether the environment normalises its observations (``normalize_obs``); the
             network's input is the same either way (needs ``points``).
+        obs_blocks: 3 for ``[D, N, Z]``, 4 for the fleet's ``[D, N, Z, H]`` (one network for all its EVs).
         checkpoint: load this checkpoint's policy (a training checkpoint or run directory) after building.
     """
 
     learns = True
+    obs_blocks = (3, 4)
 
     def __init__(
         self,
@@ -98,6 +107,7 @@ class DQNAgent(Agent):
         dueling: bool = False,
         points: int | Sequence[int] | None = None,
         normalized: bool = False,
+        obs_blocks: int = 3,
         checkpoint: str | Path | None = None,
         **hyperparameters: Any,
     ) -> None:
@@ -112,12 +122,12 @@ class DQNAgent(Agent):
         self.config = dataclasses.replace(config, **hyperparameters) if hyperparameters else config
         self.double = check_bool("double", double)
         self.dueling = check_bool("dueling", dueling)
-        self.obs_dim = 3 * self.n_stations
+        self.blocks = check_blocks(obs_blocks, "obs_blocks")
+        self.obs_dim = self.blocks * self.n_stations
         self.normalized = check_bool("normalized", normalized)
         self._divisors = self._observation_divisors(points)
         #: physical observation (m, vehicles) -> network input; saved with the networks
-        self.input_scale = (1.0 / self._divisors).astype(np.float32) if points is not None else (
-            np.ones(self.obs_dim, np.float32))  # fmt: skip
+        self.input_scale = np.ones(self.obs_dim, np.float32) if points is None else 1.0 / self._divisors
         self._set_input_scale(self.input_scale)
         cfg = self.config
         init_seed = int(rng.integers(2**63 - 1))
@@ -144,8 +154,8 @@ class DQNAgent(Agent):
 
     @classmethod
     def env_kwargs(cls, env: Any) -> dict[str, Any]:
-        """The environment's charging points per station and whether it normalises observations."""
-        return observation_units(env)
+        """The env's charging points, whether it normalises, and its observation's blocks (3 or 4)."""
+        return {**observation_units(env), "obs_blocks": observation_layout(env)}
 
     @classmethod
     def option_names(cls) -> list[str]:
@@ -163,7 +173,7 @@ class DQNAgent(Agent):
             np.asarray(points))  # fmt: skip
         if pts.shape != (self.n_stations,) or not np.issubdtype(pts.dtype, np.integer) or (pts < 1).any():
             raise ValueError(f"points={points!r}: must be an integer >= 1 or {self.n_stations} of them")
-        return unit_divisors(pts)
+        return unit_divisors(pts, self.blocks)
 
     def _set_input_scale(self, scale: np.ndarray) -> None:
         """Take ``scale`` (physical -> network) and derive the factor applied to observations."""
@@ -191,7 +201,9 @@ class DQNAgent(Agent):
     def _input(self, obs: np.ndarray) -> torch.Tensor:
         x = np.asarray(obs, dtype=np.float32)
         if x.shape[-1:] != (self.obs_dim,):
-            raise ValueError(f"observation of shape {x.shape}: expected (..., {self.obs_dim}) = [D, N, Z]")
+            raise ValueError(
+                f"observation shape {x.shape}: expected (..., {self.obs_dim}), {self.blocks} x m"
+            )
         return torch.from_numpy(x * self._obs_to_input)
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:
@@ -381,7 +393,7 @@ class DQNAgent(Agent):
         if scale.shape != self.input_scale.shape:
             raise CheckpointError(
                 f"the checkpoint was made for observations of size {scale.shape[0]}; this "
-                f"environment's are {self.obs_dim} (3 x {self.n_stations} stations)"
+                f"environment's are {self.obs_dim} ({self.blocks} x {self.n_stations} stations)"
             )
         mine = {"hidden": list(self.config.hidden), "dueling": self.dueling, "double": self.double}
         for key, value in mine.items():

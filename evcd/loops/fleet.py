@@ -25,7 +25,7 @@ from evcd.env.fleet import FleetEnv
 from evcd.env.fleet.measures import FleetMeasures
 from evcd.env.runners.base import EpisodeSpec, Policy
 from evcd.env.transition import Transition
-from evcd.loops.seeds import bootstrap_rng, episode_spec
+from evcd.loops.seeds import TRAIN_STREAM, bootstrap_rng, episode_spec
 from evcd.loops.stats import bootstrap_ci
 
 
@@ -104,6 +104,22 @@ def play_fleet(
     day = env.days[env.day].demand_seed if env.day is not None else -1
     return FleetEpisode(spec.index, day, env.measures(), returns, transitions,
                         wallclock.perf_counter() - t0, list(env.trace))  # fmt: skip
+
+
+def train_fleet(
+    env: FleetEnv, agent: Policy, episodes: int, seed: int, *, progress: bool = False
+) -> list[FleetEpisode]:
+    """Train a learning dispatcher on ``episodes`` fleet episodes (the training stream of ``seed``,
+    disjoint from the evaluation's): every guided EV explores through its own episode state and every
+    agent step goes to :meth:`observe` (independent learners sharing one network and one replay)."""
+    played = []
+    with tqdm(total=episodes, desc="fleet training", unit="ep", disable=not progress) as bar:
+        for i in range(episodes):
+            played.append(
+                play_fleet(env, agent, episode_spec(seed, i, TRAIN_STREAM), explore=True, learn=True)
+            )
+            bar.update(1)
+    return played
 
 
 #: The dispatchers the fleet takes (the rules reading ``[D, N, Z]`` or ``[D, N, Z, H]``).

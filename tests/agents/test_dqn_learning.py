@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from evcd.agents import make_agent
 from evcd.env.runners import SingleEnvRunner
@@ -40,13 +39,7 @@ MIN_OPTIMAL_SHARE = 0.85
 MAX_MEAN_EXCESS = 0.06
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Small networks: one thread is faster and keeps the numbers independent of the machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _train_and_evaluate(name: str, seed: int, train_episodes: int) -> dict:

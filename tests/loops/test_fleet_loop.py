@@ -67,3 +67,54 @@ def test_every_agent_step_reaches_observe_with_its_own_state(make_small_fleet) -
     draws = [s.rng.random() for s in agent.states]
     assert draws == [s.rng.random() for s in again.states]  # each EV's generator comes from the seed
     assert len(set(draws)) == 3
+
+
+# ---------------------------------------------------------------------------------------- learning
+#: Two EVs from the east towards cs2 (1 point, near); cs1 (2 points) is a detour of ~400 m. The
+#: second departs while the first still drives to cs2: both at cs2 costs the second a whole charge
+#: (~150 s), sending it to cs1 costs ~35 s. Ticks every 10 s.
+TWO_EVS = [ev("a", 5, "D2C2 C2B2 B2A2", "pa_cs2"), ev("b", 20, "D2C2 C2B2 B2A2", "pa_cs2")]
+
+
+class Assign:
+    """A fixed assignment of the two EVs (the enumeration of the known optimum)."""
+
+    name = "assign"
+
+    def __init__(self, stations: dict[str, int]) -> None:
+        self.stations, self.order = stations, list(stations)
+        self.seen = 0
+
+    def new_episode(self, rng: np.random.Generator) -> str:
+        self.seen += 1
+        return self.order[self.seen - 1]
+
+    def decide(self, obs: np.ndarray, episodes: list[str], explore: bool = False) -> np.ndarray:
+        return np.array([self.stations[e] for e in episodes])
+
+    def observe(self, *args: Any) -> None:
+        return None
+
+
+def test_the_shared_learner_finds_the_best_split_of_two_evs(make_small_fleet, one_torch_thread) -> None:
+    from evcd.agents import make_agent_for_env
+    from evcd.agents.dqn_config import DQNConfig
+    from evcd.loops.fleet import train_fleet
+
+    env = make_small_fleet(TWO_EVS, max_travel_time=900.0)
+    totals = {}
+    for a, b in itertools.product((0, 1), repeat=2):
+        ep = play_fleet(env, Assign({"a": a, "b": b}), episode_spec(0, 0))
+        assert ep.measures.guided_charged == 2
+        totals[(a, b)] = ep.measures.guided_travel * 2
+    best = min(totals.values())
+    assert totals[(1, 1)] - best > 60  # herding at the one-point station is costly
+    greedy = play_fleet(env, make_agent_for_env("greedy", env, np.random.default_rng(0)), episode_spec(0, 0))
+    assert greedy.measures.guided_travel * 2 == pytest.approx(totals[(1, 1)])  # nearest by road: it herds
+    config = DQNConfig(hidden=(32, 32), lr=3e-3, batch_size=32, gamma=0.9, learning_starts=50,
+                       target_update=100, exploration_steps=600, reward_scale=10.0, loss="huber")  # fmt: skip
+    agent = make_agent_for_env("dueling_ddqn", env, np.random.default_rng(0), config=config)
+    assert agent.obs_dim == 8
+    train_fleet(env, agent, 100, seed=0)  # ~800 agent steps
+    learned = play_fleet(env, agent, episode_spec(0, 0))
+    assert learned.measures.guided_travel * 2 == pytest.approx(best)
