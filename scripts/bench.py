@@ -85,17 +85,21 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     env_kwargs: dict = {"scenario": args.scenario, "evs": args.evs}
     if args.suite == "fleet":
-        from evcd.bench.fleet import fleet_overhead
+        from evcd.bench.fleet import fleet_learning_rate, fleet_overhead
 
         fleet_kwargs = {**env_kwargs, "guided_share": args.guided_share, "cache_dir": args.cache_dir}
+        learner = learner_config(compose_train(CONF, "experiment=peak").learner)  # the default regime's
         try:
             report = fleet_overhead(fleet_kwargs, episodes=args.episodes)
+            report["learning"] = fleet_learning_rate({**fleet_kwargs, "reward": "time"}, learner)
         except ValueError as exc:
             log.error("%s", exc)
             return 2
+        report["fleet_transitions_per_second"] = report["learning"]["fleet_transitions_per_second"]
         atomic_write_text(args.out, json.dumps(report, indent=1))
-        log.info("fleet_overhead %.2f (goal %s); wrote %s", report["fleet_overhead"],
-                 report["goals"]["fleet_overhead"], args.out)  # fmt: skip
+        log.info("fleet_overhead %.2f (goal %s), fleet_transitions_per_second %.1f; wrote %s",
+                 report["fleet_overhead"], report["goals"]["fleet_overhead"],
+                 report["fleet_transitions_per_second"], args.out)  # fmt: skip
         return 0
     if args.suite in ("throughput", "engines"):
         report = run_engine_suite(args, env_kwargs, replay)

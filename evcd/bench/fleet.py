@@ -1,9 +1,12 @@
-"""The fleet's cost: a fleet episode against the same window of its day simulated alone.
+"""The fleet's cost: a fleet episode against the same window of its day simulated alone, and the
+learner's speed on the fleet.
 
 ``fleet_overhead`` = wall time of a fleet episode (reset included: snapshot load, every guided EV
 observing and deciding at every tick, greedy) / wall time of the same span of the same day, loaded
 from the same snapshot and simulated with its charging points but nobody guided. Both are measured in
 the same process, alternating, on the same episodes; the ratio of the sums is reported.
+``fleet_transitions_per_second``: agent steps per second of wall time while a shared-parameter DQN
+explores and learns on fleet episodes (training stream; reset and SUMO included).
 """
 
 from __future__ import annotations
@@ -15,9 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from evcd.agents import make_agent_for_env
+from evcd.agents.dqn_config import DQNConfig
 from evcd.agents.heuristics import GreedyAgent
 from evcd.env.fleet import FleetEnv
-from evcd.loops.fleet import play_fleet
+from evcd.loops.fleet import play_fleet, train_fleet
 from evcd.loops.seeds import episode_spec
 
 log = logging.getLogger(__name__)
@@ -62,3 +67,22 @@ def fleet_overhead(env_kwargs: Mapping[str, Any], episodes: int = 3, seed: int =
         "goals": {"fleet_overhead": "<= 1.5"},
         "episodes": rows,
     }
+
+
+def fleet_learning_rate(
+    env_kwargs: Mapping[str, Any], config: DQNConfig, episodes: int = 2, seed: int = 0
+) -> dict[str, Any]:
+    """Agent steps per second while Dueling DDQN (``config``) learns on ``episodes`` fleet episodes."""
+    env = FleetEnv(**env_kwargs)
+    try:
+        env.prepare()
+        agent = make_agent_for_env("dueling_ddqn", env, np.random.default_rng(seed), config=config)
+        t0 = wallclock.perf_counter()
+        played = train_fleet(env, agent, episodes, seed)
+        wall = wallclock.perf_counter() - t0
+    finally:
+        env.close()
+    steps = sum(ep.transitions for ep in played)
+    log.info("fleet learning: %d agent steps in %.1f s (%d episodes)", steps, wall, episodes)
+    return {"fleet_transitions_per_second": steps / wall, "transitions": steps, "wall_s": wall,
+            "episodes": episodes}  # fmt: skip
