@@ -4,7 +4,8 @@
     python scripts/evaluate.py -m agent=random,greedy,queue_aware evs=200,300,400 seed=0,1,2
     python scripts/evaluate.py agent=random env.departure_window=[25200,32400]   # morning only
     python scripts/evaluate.py agent=dueling_ddqn agent.checkpoint=outputs/train/<run>   # a trained policy
-    python scripts/evaluate.py task=fleet agent=central evs=400 fleet.guided_share=0.5   # the fleet
+    python scripts/evaluate.py task=fleet agent=central evs=400 fleet.guided_share=0.5 episodes=5  # fleet
+    python scripts/evaluate.py task=fleet agent=dqn agent.checkpoint=outputs/train/<fleet run> episodes=5
 
 Writes ``episodes.csv`` (one row per episode) and ``results.json`` (summary, rows, config) into the
 Hydra run directory and logs the summary: mean, median and 95% bootstrap interval of the mean
@@ -35,25 +36,41 @@ from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.loops.evaluate import evaluate
-from evcd.loops.fleet import check_fleet_dispatcher, evaluate_fleet
+from evcd.loops.fleet import evaluate_fleet, fleet_dispatcher_learns
+from evcd.loops.fleet_figure import plot_fleet_traces
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
 from evcd.loops.run_files import (
     EVAL_CSV,
+    FLEET_CSV,
+    FLEET_PNG,
     RESULTS_JSON,
     write_episodes_csv,
     write_fleet_files,
     write_results_json,
 )
 from evcd.loops.seeds import agent_rng
-from evcd.report.fleet_figure import plot_fleet_traces
 from evcd.report.scenario import format_table
 from evcd.utils.checkpoint import CheckpointError
 from evcd.utils.validation import check_int
 
 log = logging.getLogger("evaluate")
 
-FLEET_CSV = "fleet_episodes.csv"
-FLEET_PNG = "fleet_trace.png"
+
+def trained_policy(name: str, params: dict[str, Any], learns: bool) -> dict[str, Any]:
+    """The agent's arguments: a learner's must name its trained policy (``agent.checkpoint``), whose
+    network settings it takes.
+
+    Raises:
+        ValueError: a learner without ``agent.checkpoint``.
+        CheckpointError: the checkpoint does not hold a DQN agent.
+    """
+    if not learns:
+        return params
+    if params.get("checkpoint") is None:
+        raise ValueError(f"agent {name!r} learns: give the trained policy with agent.checkpoint=PATH "
+                         "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
+    params["checkpoint"] = to_absolute_path(str(params["checkpoint"]))
+    return {**checkpoint_agent_config(params["checkpoint"]), **params}
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
@@ -65,12 +82,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     seed = check_int("seed", cfg.seed, minimum=0)
     resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
     name, params = agent_params(cfg)  # unknown agent -> ValueError listing the known ones
-    if dispatcher_learns(name):
-        if params.get("checkpoint") is None:
-            raise ValueError(f"agent {name!r} learns: give the trained policy with agent.checkpoint=PATH "
-                             "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
-        params["checkpoint"] = to_absolute_path(str(params["checkpoint"]))
-        params = {**checkpoint_agent_config(params["checkpoint"]), **params}
+    params = trained_policy(name, params, dispatcher_learns(name))
     engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
     files = [out_dir / EVAL_CSV, out_dir / RESULTS_JSON]
     for path in files:
@@ -108,7 +120,8 @@ def run_fleet(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     seed = check_int("seed", cfg.seed, minimum=0)
     resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
-    name = check_fleet_dispatcher(params.pop("name"))
+    name = str(params.pop("name"))
+    params = trained_policy(name, params, fleet_dispatcher_learns(name))
     files = [out_dir / FLEET_CSV, out_dir / RESULTS_JSON, out_dir / FLEET_PNG]
     for path in files:
         if path.exists():

@@ -8,6 +8,7 @@
     python scripts/train.py -m experiment=table agent=random,greedy,queue_aware,hindsight,dqn,dueling_ddqn \
         seed=0,1,2,3,4 evs=200,300,400                                          # the results table (joblib)
     python scripts/train.py resume=true hydra.run.dir=outputs/train/<run>       # continue a run
+    python scripts/train.py experiment=fleet agent=dueling_ddqn                 # the fleet (docs/FLEET.md)
     tensorboard --logdir outputs/
 
 Everything is in ``conf/train.yaml`` (and ``conf/experiment/``); see :mod:`evcd.loops.train` for what a
@@ -27,11 +28,15 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
+from evcd.agents import make_agent_for_env
 from evcd.cli.errors import stop_on_bad_setting
-from evcd.cli.params import agent_params, config_days, env_kwargs
+from evcd.cli.params import agent_params, config_days, env_kwargs, fleet_kwargs, learner_config
 from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
+from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
+from evcd.loops.fleet import fleet_dispatcher_learns
+from evcd.loops.fleet_train import FleetTrainSettings, train_and_evaluate_fleet
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng
 from evcd.loops.train import TrainSettings, train_and_evaluate
@@ -42,12 +47,60 @@ from evcd.utils.validation import check_int
 log = logging.getLogger("train")
 
 
-def build(cfg: DictConfig) -> dict[str, Any]:
-    """Everything the run needs, checked before any simulation starts."""
+def check_task(cfg: DictConfig) -> str:
+    """The run's task, if its regime is made for it: ``task=fleet`` trains in a fleet regime
+    (``experiment=fleet``: episodes, checkpoints and validation sized for fleet episodes, which last
+    ~100 single-target episodes each), and a fleet regime trains the fleet.
+
+    Raises:
+        ValueError: the task and the regime do not go together (the message says what to pass).
+    """
+    task, regime = str(cfg.task), str(cfg.regime)
+    if task not in ("single", "fleet"):
+        raise ValueError(f"task={task!r}: must be single or fleet")
+    if task == "fleet" and not regime.startswith("fleet"):
+        raise ValueError(f"task=fleet with experiment regime {regime!r}: train the fleet with "
+                         "experiment=fleet (its episodes, checkpoints and validation are sized for fleet "
+                         "episodes)")  # fmt: skip
+    if task == "single" and regime.startswith("fleet"):
+        raise ValueError(f"regime {regime!r} is the fleet's: it needs task=fleet")
+    return task
+
+
+def _days(cfg: DictConfig, seed: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """The training and evaluation days (one held-out day per seed with ``eval.day_per_seed``)."""
     train_days, eval_days = config_days(cfg, "train.days"), config_days(cfg, "eval.days")
-    seed = check_int("seed", cfg.seed, minimum=0)
     if bool(cfg.eval.day_per_seed):
         eval_days = (eval_days[seed % len(eval_days)],)
+    if tuple(cfg.env.demand_seeds) != train_days:
+        raise ValueError(f"env.demand_seeds={list(cfg.env.demand_seeds)}: train.py sets it from "
+                         f"train.days (and eval.days); set those instead")  # fmt: skip
+    if set(train_days) & set(eval_days):
+        log.warning("train.days and eval.days share %s: the evaluation is not on unseen traffic",
+                    sorted(set(train_days) & set(eval_days)))  # fmt: skip
+    return train_days, eval_days
+
+
+def _validation_days(
+    cfg: DictConfig, train_days: tuple[int, ...], eval_days: tuple[int, ...]
+) -> tuple[int, ...]:
+    days = config_days(cfg, "train.validation.days")
+    shared = set(days) & set(train_days + eval_days)
+    if shared:
+        raise ValueError(f"train.validation.days share {sorted(shared)} with train.days or eval.days: "
+                         "validate on tuning days")  # fmt: skip
+    return days
+
+
+def _window(cfg: DictConfig) -> dict[str, Any]:
+    window = cfg.train.validation.departure_window
+    return {"departure_window": tuple(window)} if window is not None else {}
+
+
+def build(cfg: DictConfig) -> dict[str, Any]:
+    """Everything the run needs, checked before any simulation starts."""
+    seed = check_int("seed", cfg.seed, minimum=0)
+    train_days, eval_days = _days(cfg, seed)
     settings = TrainSettings(
         episodes=check_int("train.episodes", cfg.train.episodes, minimum=0),
         eval_episodes=check_int("eval.episodes", cfg.eval.episodes, minimum=1),
@@ -68,31 +121,17 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
                          "resume=true with its hydra.run.dir")  # fmt: skip
     params.pop("checkpoint", None)
-    if tuple(cfg.env.demand_seeds) != train_days:
-        raise ValueError(f"env.demand_seeds={list(cfg.env.demand_seeds)}: train.py sets it from "
-                         f"train.days (and eval.days); set those instead")  # fmt: skip
     base = env_kwargs(cfg)
     envs = {
         "train": ChargingNavEnv(**{**base, "demand_seeds": train_days}),
         "eval": ChargingNavEnv(**{**base, "demand_seeds": eval_days}),
     }  # validates every environment value; loads the scenario; no SUMO yet
-    if set(train_days) & set(eval_days):
-        log.warning("train.days and eval.days share %s: the evaluation is not on unseen traffic",
-                    sorted(set(train_days) & set(eval_days)))  # fmt: skip
     rules: dict[str, Any] = {}
     if settings.validation.every and dispatcher_learns(name):
-        validation = cfg.train.validation
-        window = validation.departure_window
-        envs["validation"] = ChargingNavEnv(**{
-            **base, "demand_seeds": config_days(cfg, "train.validation.days"),
-            **({"departure_window": tuple(window)} if window is not None else {}),
-        })  # fmt: skip
-        shared = set(config_days(cfg, "train.validation.days")) & set(train_days + eval_days)
-        if shared:
-            raise ValueError(f"train.validation.days share {sorted(shared)} with train.days or eval.days: "
-                             "validate on tuning days")  # fmt: skip
+        days = _validation_days(cfg, train_days, eval_days)
+        envs["validation"] = ChargingNavEnv(**{**base, "demand_seeds": days, **_window(cfg)})
         rules = {str(r): make_dispatcher(str(r), envs["validation"], baseline_rng(seed))
-                 for r in validation.rules}  # fmt: skip
+                 for r in cfg.train.validation.rules}  # fmt: skip
     agent = make_dispatcher(name, envs["train"], agent_rng(settings.seed), **params)
     baselines = {}
     for rule in cfg.eval.baselines:
@@ -104,10 +143,105 @@ def build(cfg: DictConfig) -> dict[str, Any]:
             "runner": lambda phase: make_runner(envs[phase], engine, batch)}  # fmt: skip
 
 
+def _fleet_rule(name: Any, env: FleetEnv, seed: int, key: str) -> Any:
+    if fleet_dispatcher_learns(name):
+        raise ValueError(f"{key}: {name!r} is not a rule (the fleet's rules: random, greedy, queue_aware, "
+                         "reservation, central)")  # fmt: skip
+    return make_agent_for_env(str(name), env, baseline_rng(seed))
+
+
+def build_fleet(cfg: DictConfig) -> dict[str, Any]:
+    """``task=fleet``: everything the fleet run needs, checked before any simulation starts."""
+    seed = check_int("seed", cfg.seed, minimum=0)
+    train_days, eval_days = _days(cfg, seed)
+    settings = FleetTrainSettings(
+        episodes=check_int("train.episodes", cfg.train.episodes, minimum=1),
+        eval_episodes=check_int("eval.episodes", cfg.eval.episodes, minimum=1),
+        seed=seed,
+        checkpoint_every=check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
+        progress=bool(cfg.progress),
+        resamples=check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
+        validation=ValidationSettings(cfg.train.validation.every, cfg.train.validation.episodes),
+    )
+    check_int("torch_threads", cfg.torch_threads, minimum=1)
+    params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
+    name = str(params.pop("name"))
+    learns = fleet_dispatcher_learns(name)  # unknown or single-only -> ValueError listing the fleet's
+    if params.pop("checkpoint", None) is not None:
+        raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
+                         "resume=true with its hydra.run.dir")  # fmt: skip
+    if learns:
+        params["config"] = learner_config(cfg.learner)
+    base = fleet_kwargs(cfg)  # refuses the single target's options
+    envs = {
+        "train": FleetEnv(**{**base, "demand_seeds": train_days}),
+        "eval": FleetEnv(**{**base, "demand_seeds": eval_days}),
+    }  # validates every value (guided_share in (0, 1]); no SUMO yet
+    rules: dict[str, Any] = {}
+    if settings.validation.every and learns:
+        days = _validation_days(cfg, train_days, eval_days)
+        envs["validation"] = FleetEnv(**{**base, "demand_seeds": days, **_window(cfg)})
+        rules = {str(r): _fleet_rule(r, envs["validation"], seed, "train.validation.rules")
+                 for r in cfg.train.validation.rules}  # fmt: skip
+    for env in envs.values():
+        env.check_days()  # every day has EVs to guide (its route file; no SUMO)
+    agent = make_agent_for_env(name, envs["train"], agent_rng(seed), **params)
+    baselines = {str(r): _fleet_rule(r, envs["eval"], seed, "eval.baselines") for r in cfg.eval.baselines}
+    return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules}
+
+
+def train_fleet(cfg: DictConfig, out_dir: Path) -> float:
+    """``task=fleet``: train (a learner) and evaluate on fleet episodes; return the guided EVs' mean
+    travel time over the evaluation."""
+    parts = build_fleet(cfg)
+    torch.set_num_threads(int(cfg.torch_threads))
+    envs, agent, settings = parts["envs"], parts["agent"], parts["settings"]
+    log.info("fleet: %r on %s, evs=%s, guided_share %s, train days %s, eval days %s, seed %d -> %s", agent,
+             envs["train"].scenario.root, cfg.evs, envs["train"].guided_share,
+             list(envs["train"].config.demand_seeds), list(envs["eval"].config.demand_seeds), settings.seed,
+             out_dir)  # fmt: skip
+    config = OmegaConf.to_container(cfg, resolve=True)
+    result = train_and_evaluate_fleet(agent, envs, settings, out_dir, baselines=parts["baselines"],
+                                      resume=bool(cfg.resume), config=config,
+                                      validation_rules=parts["rules"])  # fmt: skip
+    for line in fleet_report_lines(result, cfg.evs):
+        log.info("%s", line)
+    return float(result.summary["guided_travel"])
+
+
+def fleet_report_lines(result: Any, evs: int) -> list[str]:
+    """A fleet run's outcome: training, the guided EVs' and everybody's travel times, the pairs."""
+    s, t = result.summary, result.training
+    lines = []
+    if t["episodes"]:
+        lines.append(
+            f"trained {t['episodes']} fleet episodes, {t['transitions']} agent steps, {t['gradient_steps']} "
+            f"gradient steps in {t['wall_s']:.0f} s ({t['transitions_per_second']:.1f} agent steps/s; day "
+            f"builds {t['day_build_s']:.0f} s, validation {t['validation_s']:.0f} s)"
+        )
+    lines.append(
+        f"{result.agent}, evs={evs}, seed={s['seed']}: guided EVs {s['guided_travel']:.1f} s (95% CI "
+        f"{s['guided_travel_ci'][0]:.1f}-{s['guided_travel_ci'][1]:.1f}), all EVs {s['all_travel']:.1f} s, "
+        f"herding {s['herding']:.2f}, {s['truncated']} of {s['guided']} guided EVs truncated, over "
+        f"{s['episodes']} fleet episodes"
+    )
+    for name, measures in result.paired.items():
+        for key, p in measures.items():
+            lines.append(
+                f"vs {name}, {key} on the same {p['pairs']} episodes: {p['agent_mean']:.1f} s vs "
+                f"{p['baseline_mean']:.1f} s, difference {p['mean_difference']:+.1f} s (95% CI "
+                f"{p['ci_low']:+.1f} to {p['ci_high']:+.1f}); lower in {p['agent_faster']}, higher in "
+                f"{p['agent_slower']}"
+            )
+    return lines
+
+
 def train(cfg: DictConfig) -> float:
     """Run the training described by ``cfg`` in Hydra's run directory; return the evaluation mean
-    travel time (what a sweeper minimises)."""
+    travel time (what a sweeper minimises; with ``task=fleet`` the guided EVs')."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    if check_task(cfg) == "fleet":
+        return train_fleet(cfg, out_dir)
     parts = build(cfg)
     torch.set_num_threads(int(cfg.torch_threads))
     envs = parts["envs"]

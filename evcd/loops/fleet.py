@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from evcd.agents import FLEET_AGENT_NAMES
+from evcd.agents import FLEET_AGENT_NAMES, agent_class
 from evcd.env.fleet import FleetEnv
 from evcd.env.fleet.measures import FleetMeasures
 from evcd.env.runners.base import EpisodeSpec, Policy
@@ -122,8 +122,9 @@ def train_fleet(
     return played
 
 
-#: The dispatchers the fleet takes (the rules reading ``[D, N, Z]`` or ``[D, N, Z, H]``).
-FLEET_DISPATCHERS: tuple[str, ...] = FLEET_AGENT_NAMES
+#: The dispatchers the fleet takes: the rules reading ``[D, N, Z]`` or ``[D, N, Z, H]``, and the learners
+#: (one network shared by every guided EV, trained by :mod:`evcd.loops.fleet_train`).
+FLEET_DISPATCHERS: tuple[str, ...] = (*FLEET_AGENT_NAMES, "dqn", "dueling_ddqn")
 
 
 def check_fleet_dispatcher(name: Any) -> str:
@@ -138,6 +139,11 @@ def check_fleet_dispatcher(name: Any) -> str:
             f"the fleet takes: {', '.join(FLEET_DISPATCHERS)}"
         )
     return str(name)
+
+
+def fleet_dispatcher_learns(name: Any) -> bool:
+    """Whether the fleet dispatcher ``name`` learns (``ValueError`` if the fleet does not take it)."""
+    return agent_class(check_fleet_dispatcher(name)).learns
 
 
 def evaluate_fleet(

@@ -4,7 +4,9 @@
 A run directory (``scripts/train.py``) holds ``train_episodes.csv``, ``episodes.csv``,
 ``baseline_<rule>_episodes.csv`` (each baseline rule on the same episodes), ``results.json``,
 ``learning_curve.png``, ``checkpoints/`` and ``tensorboard/``; ``scripts/evaluate.py`` writes
-``episodes.csv`` and ``results.json``. Every file is written atomically; none already there is
+``episodes.csv`` and ``results.json``. A fleet run (``task=fleet``) writes ``train_fleet_episodes.csv``,
+``fleet_episodes.csv``, ``baseline_<rule>_fleet_episodes.csv`` and ``fleet_trace.png`` instead of the
+episodes files (one row per fleet episode). Every file is written atomically; none already there is
 overwritten unless asked.
 """
 
@@ -27,13 +29,18 @@ TRAIN_CSV = "train_episodes.csv"
 EVAL_CSV = "episodes.csv"
 RESULTS_JSON = "results.json"
 CURVE_PNG = "learning_curve.png"
+FLEET_TRAIN_CSV = "train_fleet_episodes.csv"
+FLEET_CSV = "fleet_episodes.csv"
+FLEET_PNG = "fleet_trace.png"
 #: The files of a finished run (a new run refuses a directory that holds one of them), as glob patterns.
-OUTPUTS = (TRAIN_CSV, EVAL_CSV, "baseline_*_episodes.csv", RESULTS_JSON, CURVE_PNG)
+OUTPUTS = (TRAIN_CSV, EVAL_CSV, "baseline_*_episodes.csv", RESULTS_JSON, CURVE_PNG,
+           FLEET_TRAIN_CSV, FLEET_CSV, FLEET_PNG)  # fmt: skip
 
 
-def baseline_csv(rule: str) -> str:
-    """The episodes file of the baseline rule ``rule`` (evaluated on the run's evaluation episodes)."""
-    return f"baseline_{rule}_episodes.csv"
+def baseline_csv(rule: str, fleet: bool = False) -> str:
+    """The episodes file of the baseline rule ``rule`` (evaluated on the run's evaluation episodes);
+    ``fleet``: of a fleet run."""
+    return f"baseline_{rule}_{'fleet_' if fleet else ''}episodes.csv"
 
 
 CSV_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(EpisodeRow))
@@ -133,11 +140,16 @@ def write_fleet_files(
     csv_path, json_path = Path(csv_path), Path(json_path)
     for path in (csv_path, json_path):
         refuse_clobber(path, overwrite=False)
+    atomic_write_text(csv_path, rows_csv_text(rows))
+    payload = {"summary": dict(summary), "episodes": [dict(r) for r in rows], "config": config}
+    atomic_write_json(json_path, json_floats(payload))
+    return csv_path, json_path
+
+
+def rows_csv_text(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Flat rows (the same keys each, e.g. :meth:`~evcd.loops.fleet.FleetEpisode.row`) as CSV text."""
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else [], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    atomic_write_text(csv_path, buf.getvalue())
-    payload = {"summary": dict(summary), "episodes": [dict(r) for r in rows], "config": config}
-    atomic_write_json(json_path, json_floats(payload))
-    return csv_path, json_path
+    return buf.getvalue()

@@ -146,6 +146,28 @@ def paired_difference(
         raise ValueError("paired comparison: the agent's and the baseline's episodes differ")
     pairs = [(a.travel_time, b.travel_time) for a, b in zip(agent_rows, baseline_rows, strict=True)
              if not a.truncated and not b.truncated]  # fmt: skip
+    return paired_values([a for a, _ in pairs], [b for _, b in pairs], rng, resamples)
+
+
+def paired_values(
+    agent: Sequence[float],
+    baseline: Sequence[float],
+    rng: np.random.Generator,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+) -> dict[str, Any]:
+    """Agent minus baseline over paired values (the same episodes, in the same order); pairs where
+    either value is not finite (NaN: nothing to measure) are left out.
+
+    Negative means the agent's value is lower. Returns the mean difference with its percentile
+    bootstrap 95% interval, the number of pairs, and how often the agent was lower, equal or higher.
+
+    Raises:
+        ValueError: the two sequences differ in length.
+    """
+    if len(agent) != len(baseline):
+        raise ValueError(f"paired comparison: {len(agent)} values against {len(baseline)}")
+    pairs = [(float(a), float(b)) for a, b in zip(agent, baseline, strict=True)
+             if math.isfinite(a) and math.isfinite(b)]  # fmt: skip
     diff = np.array([a - b for a, b in pairs], dtype=np.float64)
     lo, hi = bootstrap_ci(diff, rng, resamples)
     return {

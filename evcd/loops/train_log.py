@@ -10,6 +10,10 @@ interrupted one wrote after its last checkpoint):
   ``eval/paired_difference_<rule>`` (agent minus rule on the same episodes);
 - the periodic held-out validation (:mod:`evcd.loops.validation`): ``eval/validation_travel_time``
   (the policy without exploration) and ``eval/validation_<rule>`` (the rules on the same episodes);
+- a fleet run (:mod:`evcd.loops.fleet_train`), per training fleet episode: ``charts/guided_travel``,
+  ``charts/all_travel``, ``charts/queue_wait``, ``charts/herding``, ``charts/switches`` (per guided
+  EV), ``charts/truncated`` (guided EVs), with the same epsilon, speed and losses; its validation
+  and evaluation use the ``eval/`` tags above (guided EVs' mean travel time);
 - the run's resolved configuration as text (``config``).
 """
 
@@ -61,6 +65,21 @@ class TrainLog:
         w.add_scalar("charts/queue_wait", row.queue_wait, step)
         w.add_scalar("charts/switches", row.switches, step)
         w.add_scalar("charts/truncated", float(row.truncated), step)
+        self._learner(stats, step, wall_s)
+
+    def fleet_episode(
+        self, row: Mapping[str, Any], stats: Mapping[str, float], step: int, wall_s: float
+    ) -> None:
+        """Log one training fleet episode (``row``: :meth:`~evcd.loops.fleet.FleetEpisode.row`)."""
+        for key in ("guided_travel", "all_travel", "queue_wait", "herding", "switches", "truncated"):
+            value = float(row[key])
+            if math.isfinite(value):
+                self.writer.add_scalar(f"charts/{key}", value, step)
+        self._learner(stats, step, wall_s)
+
+    def _learner(self, stats: Mapping[str, float], step: int, wall_s: float) -> None:
+        """Exploration, speed and the losses over the gradient steps since the last call."""
+        w = self.writer
         if "epsilon" in stats:
             w.add_scalar("charts/epsilon", stats["epsilon"], step)
         if wall_s > 0:
@@ -81,12 +100,22 @@ class TrainLog:
         step: int,
     ) -> None:
         """Log the evaluation means (an :class:`~evcd.loops.stats.EvalResult` each) at ``step``."""
-        value = evaluation.summary.mean_travel_time
+        self.scalars(
+            evaluation.summary.mean_travel_time,
+            {name: base.summary.mean_travel_time for name, base in baselines.items()},
+            paired,
+            step,
+        )
+
+    def scalars(
+        self, value: float, baselines: Mapping[str, float], paired: Mapping[str, Mapping[str, Any]], step: int
+    ) -> None:
+        """Log an evaluation: the agent's mean travel time, each baseline's and each paired difference."""
         if math.isfinite(value):
             self.writer.add_scalar("eval/travel_time", value, step)
         for name, base in baselines.items():
-            if math.isfinite(base.summary.mean_travel_time):
-                self.writer.add_scalar(f"eval/{name}_travel_time", base.summary.mean_travel_time, step)
+            if math.isfinite(base):
+                self.writer.add_scalar(f"eval/{name}_travel_time", base, step)
             difference = paired[name]["mean_difference"]
             if math.isfinite(difference):
                 self.writer.add_scalar(f"eval/paired_difference_{name}", difference, step)

@@ -15,7 +15,7 @@ import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Protocol, TypeVar
 
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRow
@@ -30,10 +30,25 @@ CHECKPOINT_FORMAT = "evcd.train/1"
 RESUME_FREE_KEYS = frozenset({"resume", "progress"})
 
 
+class SavedState(Protocol):
+    """A trainer's position as saved in its checkpoints (:class:`TrainState`, and the fleet's
+    :class:`~evcd.loops.fleet_train.FleetTrainState`)."""
+
+    FORMAT: ClassVar[str]
+    episodes_done: int
+    transitions: int
+
+    def to_dict(self) -> dict[str, Any]: ...
+
+
+S = TypeVar("S")
+
+
 @dataclass
 class TrainState:
     """Where training stands (saved in every checkpoint)."""
 
+    FORMAT: ClassVar[str] = CHECKPOINT_FORMAT
     episodes_done: int = 0
     transitions: int = 0
     wall_s: float = 0.0  # training wall time over every session (day builds excluded)
@@ -98,10 +113,11 @@ def config_diff(saved: Mapping[str, Any], current: Mapping[str, Any], prefix: st
     return out
 
 
-def save_training(run_dir: Path, agent: Agent, state: TrainState, config: Mapping[str, Any] | None) -> None:
-    """Write the agent, the trainer's position and the config as the run's latest checkpoint."""
+def save_training(run_dir: Path, agent: Agent, state: SavedState, config: Mapping[str, Any] | None) -> None:
+    """Write the agent, the trainer's position (its class's ``FORMAT``) and the config as the run's
+    latest checkpoint."""
     payload = {
-        "format": CHECKPOINT_FORMAT,
+        "format": state.FORMAT,
         "agent": agent.state_dict(),  # type: ignore[attr-defined]
         "trainer": state.to_dict(),
         "config": dict(config) if config is not None else None,
@@ -110,17 +126,20 @@ def save_training(run_dir: Path, agent: Agent, state: TrainState, config: Mappin
     log.info("checkpoint after %d episodes: %s", state.episodes_done, path)
 
 
-def restore_training(run_dir: Path, agent: Agent, config: Mapping[str, Any] | None) -> TrainState:
-    """Load the run's latest checkpoint into ``agent``; the trainer's position.
+def restore_training(
+    run_dir: Path, agent: Agent, config: Mapping[str, Any] | None, state_cls: type[S] = TrainState
+) -> S:
+    """Load the run's latest checkpoint into ``agent``; the trainer's position (a ``state_cls``).
 
     Raises:
-        CheckpointError: not a training checkpoint, or damaged.
+        CheckpointError: not a checkpoint of ``state_cls``'s trainer (its ``FORMAT``), or damaged.
         ValueError: ``config`` differs from the checkpoint's run (the message names each difference).
     """
     payload = load_checkpoint(run_dir / CHECKPOINTS)
-    if payload.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"{run_dir / CHECKPOINTS}: not a training checkpoint (format "
-                              f"{payload.get('format')!r}, expected {CHECKPOINT_FORMAT!r})")  # fmt: skip
+    expected = state_cls.FORMAT  # type: ignore[attr-defined]
+    if payload.get("format") != expected:
+        raise CheckpointError(f"{run_dir / CHECKPOINTS}: not a checkpoint of this trainer (format "
+                              f"{payload.get('format')!r}, expected {expected!r})")  # fmt: skip
     saved = payload.get("config")
     if config is not None and saved is not None:
         diff = config_diff(saved, config)
@@ -130,6 +149,6 @@ def restore_training(run_dir: Path, agent: Agent, config: Mapping[str, Any] | No
                 "must continue the same experiment): " + "; ".join(diff)
             )
     agent.load_state_dict(payload["agent"])  # type: ignore[attr-defined]
-    state = TrainState.from_dict(payload["trainer"])
+    state = state_cls.from_dict(payload["trainer"])  # type: ignore[attr-defined]
     log.info("resuming after %d training episodes (%d transitions)", state.episodes_done, state.transitions)
     return state

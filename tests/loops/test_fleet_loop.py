@@ -55,6 +55,8 @@ def test_every_agent_step_reaches_observe_with_its_own_state(make_small_fleet) -
     assert ep.transitions == sum(agent.calls) == sum(len(s.steps) for s in agent.states)
     assert max(agent.calls) >= 2  # agents due together are decided together
     outcomes = {o["vehicle"]: o for o in env.outcomes()}
+    assert ep.measures.switches == pytest.approx(np.mean([o["switches"] for o in outcomes.values()]))
+    assert ep.measures.switches > 0  # every EV was sent from cs1 to cs2
     for state, vid in zip(agent.states, ("a", "b", "c"), strict=True):
         steps = state.steps
         assert [t.action for t in steps] == [0] + [1] * (len(steps) - 1)

@@ -168,7 +168,8 @@ def test_the_fleet_task_composes_its_defaults_and_builds_every_fleet_rule(small)
     import numpy as np
 
     cfg = compose_evaluate("task=fleet")
-    assert cfg.task == "fleet" and cfg.episodes == 5 and cfg.fleet.guided_share == 1.0
+    assert cfg.task == "fleet" and cfg.fleet.guided_share == 1.0
+    assert cfg.episodes == compose_evaluate().episodes  # the task does not change how many
     assert list(cfg.env.departure_window) == [25200.0, 36000.0] and cfg.env.reward == "time"
     assert compose_evaluate().task == "single"
     cfg = compose_evaluate(*small, *FLEET, "fleet.guided_share=0.5")
@@ -202,7 +203,8 @@ def test_evaluate_a_fleet_end_to_end(small, tmp_path):
         (["fleet.guided_share=0"], "guided_share=0"),
         (["fleet.guided_share=1.5"], "guided_share=1.5"),
         (["agent=hindsight"], "agent 'hindsight' is not a fleet dispatcher"),
-        (["agent=dueling_ddqn"], "agent 'dueling_ddqn' is not a fleet dispatcher"),
+        (["agent=dueling_ddqn"], "agent 'dueling_ddqn' learns: give the trained policy"),
+        (["agent=dqn", "agent.checkpoint=nowhere"], "nowhere"),
         (["env.protocol=paper"], "env.protocol=paper is for the single target"),
         (["env.departure_window=[3600,3660]"], "nothing to guide"),
     ],

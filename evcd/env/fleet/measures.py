@@ -10,6 +10,7 @@
 - ``herding``: the largest share of the guided EVs departing in one 10-minute bin of the window that
   ended at the same station (bins with at least :data:`HERD_MIN_EVS` guided EVs; NaN if none). 1 means
   everybody of some bin went to one station.
+- ``switches``: mean number of station changes per guided EV (how much the centre changed its mind).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ class FleetMeasures:
     all_unfinished: int
     all_travel: float
     herding: float
+    switches: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (for JSON and CSV)."""
@@ -87,6 +89,7 @@ def measure(
         all_unfinished=len(candidates) - len(travel),
         all_travel=_mean(travel),
         herding=max(shares) if shares else math.nan,
+        switches=_mean([float(o.get("switches", 0)) for o in outcomes]) if outcomes else 0.0,
     )
 
 

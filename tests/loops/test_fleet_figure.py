@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from matplotlib.image import imread
 
-from evcd.report.fleet_figure import plot_fleet_traces
+from evcd.loops.fleet_figure import plot_fleet_traces
 
 
 def test_one_panel_per_dispatcher_written_as_png(tmp_path) -> None:
