@@ -19,6 +19,7 @@ import logging
 import sys
 from pathlib import Path
 
+from evcd.report.fleet_table import make_fleet_table
 from evcd.report.sweep import IncompleteSweepError, ResultsError
 from evcd.report.table import make_table
 
@@ -37,14 +38,19 @@ def main(argv: list[str] | None = None) -> int:
         help="build the table from the finished jobs and list the missing and failed ones",
     )
     p.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (default 10000)")
+    p.add_argument("--fleet", action="store_true", help="fleet runs (experiment=fleet): the fleet table")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     if args.resamples < 1:
         log.error("--resamples=%d: must be >= 1", args.resamples)
         return 2
     try:
-        out = make_table(args.dirs, args.out, overwrite=args.overwrite,
-                         allow_incomplete=args.allow_incomplete, resamples=args.resamples)  # fmt: skip
+        if args.fleet:
+            out = make_fleet_table(args.dirs, args.out, overwrite=args.overwrite,
+                                   allow_incomplete=args.allow_incomplete)  # fmt: skip
+        else:
+            out = make_table(args.dirs, args.out, overwrite=args.overwrite,
+                             allow_incomplete=args.allow_incomplete, resamples=args.resamples)  # fmt: skip
     except IncompleteSweepError as exc:
         log.error("%s\npass --allow-incomplete to build the table from the finished jobs", exc)
         return 1

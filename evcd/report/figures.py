@@ -39,21 +39,23 @@ def agent_colors(agents: Sequence[str]) -> dict[str, Any]:
 
 
 def plot_results_bars(
-    stats: Mapping[str, Mapping[str, Mapping[int, SeedStat]]],
+    stats: Mapping[str, Mapping[str, Mapping[Any, SeedStat]]],
     path: str | Path,
     paper: Mapping[str, Mapping[int, float]] | None = None,
     colors: Mapping[str, Any] | None = None,
     title: str = "",
+    xlabel: str = "background EVs",
 ) -> Path:
     """Save a grouped bar chart: per regime a panel, x = EV count, a bar per agent with its interval.
 
     Args:
-        stats: regime -> agent -> evs -> mean over seeds with its 95% interval (the bars and error bars;
-            no error bar for a single seed).
+        stats: regime -> agent -> x (the EV count, or ``xlabel``'s quantity) -> mean over seeds with its
+            95% interval (the bars and error bars; no error bar for a single seed).
         path: PNG to write (atomically).
         paper: agent -> evs -> the paper's value, drawn as a hollow marker on that agent's bar.
         colors: agent -> colour (default: :func:`agent_colors` in the order met).
         title: figure title.
+        xlabel: what the x values are.
     """
     regimes = list(stats)
     colors = colors or agent_colors(list(dict.fromkeys(a for r in regimes for a in stats[r])))
@@ -73,12 +75,12 @@ def plot_results_bars(
             if paper and agent in paper:
                 ax.scatter(x, [paper[agent].get(e, math.nan) for e in evs], marker="D", s=46, zorder=5,
                            facecolors="white", edgecolors=colors[agent], linewidths=1.8)  # fmt: skip
-        ax.set_xticks(np.arange(len(evs)), [str(e) for e in evs])
-        ax.set_xlabel("background EVs")
+        ax.set_xticks(np.arange(len(evs)), [f"{e:g}" for e in evs])
+        ax.set_xlabel(xlabel)
         ax.set_ylabel("mean travel time (s)")
         ns = sorted({c.n for a in agents for c in stats[regime][a].values()})
         seeds = f"{ns[0]}" if len(ns) == 1 else f"{ns[0]}-{ns[-1]}"
-        ax.set_title(f"regime: {regime} ({seeds} seeds per bar)")
+        ax.set_title(f"{'' if ',' in regime else 'regime: '}{regime} ({seeds} seeds per bar)")
         ax.grid(axis="y", alpha=0.3)
         ax.set_axisbelow(True)
         handles, _ = ax.get_legend_handles_labels()

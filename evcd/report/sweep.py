@@ -21,10 +21,10 @@ import logging
 import math
 import re
 from collections import defaultdict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Protocol
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
@@ -62,6 +62,7 @@ class JobResult:
     the mean travel time on each in ``day_means``.
     """
 
+    KEY_NAMES: ClassVar[tuple[str, ...]] = ("regime", "agent", "evs", "seed")
     regime: str
     agent: str
     evs: int
@@ -95,6 +96,24 @@ class JobResult:
         return self.regime, self.agent, self.evs, self.seed
 
 
+class Job(Protocol):
+    """What :func:`collect` needs of a job: the cell it stands for (``key``, its fields named by
+    ``KEY_NAMES``) and its directory (a single-target :class:`JobResult`, or a fleet job,
+    :class:`evcd.report.fleet_table.FleetJob`)."""
+
+    KEY_NAMES: ClassVar[tuple[str, ...]]
+
+    @property
+    def key(self) -> tuple[Any, ...]: ...
+
+    @property
+    def job_dir(self) -> Path: ...
+
+
+#: Reads a job's parsed ``results.json`` (raising KeyError, TypeError or ValueError if malformed).
+Parser = Callable[[Mapping[str, Any], Path], Any]
+
+
 @dataclass(frozen=True)
 class JobGap:
     """A job expected but not finished: ``status`` is ``"missing"`` (no subdirectory) or ``"failed"``."""
@@ -113,9 +132,9 @@ class JobGap:
 
 @dataclass(frozen=True)
 class Collection:
-    """The finished jobs (sorted by :attr:`JobResult.key`) and the gaps of the directories read."""
+    """The finished jobs (sorted by their ``key``) and the gaps of the directories read."""
 
-    jobs: tuple[JobResult, ...]
+    jobs: tuple[Any, ...]
     gaps: tuple[JobGap, ...]
     expected: int
     sources: tuple[Path, ...]
@@ -205,6 +224,8 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
     Raises:
         KeyError, TypeError, ValueError: a field is missing or malformed.
     """
+    if data.get("task") == "fleet":
+        raise ValueError("a fleet run (task=fleet): make its table with scripts/make_table.py --fleet")
     summary, training = data["summary"], data.get("training") or {}
     config = data.get("config")
     if not isinstance(config, Mapping):
@@ -248,30 +269,31 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
     )
 
 
-def read_job(job_dir: Path, overrides: Sequence[str] = ()) -> JobResult | JobGap:
-    """The job's results, or a ``"failed"`` :class:`JobGap` if ``results.json`` is absent or unreadable."""
+def read_job(job_dir: Path, overrides: Sequence[str] = (), parse: Parser = job_result) -> Any:
+    """The job's results (``parse`` of its ``results.json``: a :class:`JobResult` by default), or a
+    ``"failed"`` :class:`JobGap` if ``results.json`` is absent or unreadable."""
     path = job_dir / RESULTS_JSON
     if not path.is_file():
         reason = "; ".join(r for r in (f"no {RESULTS_JSON}", _log_reason(job_dir)) if r)
         return JobGap("failed", tuple(overrides), job_dir, reason)
     try:
-        return job_result(json.loads(path.read_text()), job_dir)
+        return parse(json.loads(path.read_text()), job_dir)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         reason = f"{RESULTS_JSON} unreadable ({type(exc).__name__}: {exc})"
         return JobGap("failed", tuple(overrides), job_dir, reason)
 
 
-def _collect_sweep(sweep_dir: Path) -> tuple[list[JobResult], list[JobGap], int]:
+def _collect_sweep(sweep_dir: Path, parse: Parser) -> tuple[list[Any], list[JobGap], int]:
     expected = expand_sweep(_task_overrides(sweep_dir))
     found: dict[frozenset[tuple[str, str]], list[Path]] = defaultdict(list)
     for path in sorted(sweep_dir.glob(f"*/{OVERRIDES_YAML.as_posix()}")):
         job_dir = path.parent.parent
         found[_canonical(_job_overrides(job_dir))].append(job_dir)
-    jobs: list[JobResult] = []
+    jobs: list[Any] = []
     gaps: list[JobGap] = []
     for combo in expected:
-        read = [read_job(d, combo) for d in found.pop(_canonical(combo), [])]
-        done = [r for r in read if isinstance(r, JobResult)]
+        read = [read_job(d, combo, parse) for d in found.pop(_canonical(combo), [])]
+        done = [r for r in read if not isinstance(r, JobGap)]
         if not read:
             gaps.append(JobGap("missing", combo, None, f"no job directory in {sweep_dir}"))
         elif done:
@@ -283,48 +305,52 @@ def _collect_sweep(sweep_dir: Path) -> tuple[list[JobResult], list[JobGap], int]
             gaps += [r for r in read if isinstance(r, JobGap)]
     for dirs in found.values():  # not in the sweep's product (e.g. a run copied in): used, with a warning
         for job_dir in dirs:
-            r = read_job(job_dir, _job_overrides(job_dir))
+            r = read_job(job_dir, _job_overrides(job_dir), parse)
             log.warning("%s: not a job of the sweep %s; %s", job_dir, sweep_dir,
-                        "included" if isinstance(r, JobResult) else "ignored (no results)")  # fmt: skip
-            if isinstance(r, JobResult):
+                        "ignored (no results)" if isinstance(r, JobGap) else "included")  # fmt: skip
+            if not isinstance(r, JobGap):
                 jobs.append(r)
     log.info("%s: %d of %d expected jobs finished", sweep_dir, len(jobs), len(expected))
     return jobs, gaps, len(expected)
 
 
-def collect(dirs: Sequence[str | Path], allow_incomplete: bool = False) -> Collection:
-    """Read the jobs of multirun directories (``multirun.yaml``) and single run directories.
+def collect(
+    dirs: Sequence[str | Path], allow_incomplete: bool = False, parse: Parser = job_result
+) -> Collection:
+    """Read the jobs of multirun directories (``multirun.yaml``) and single run directories, each
+    ``results.json`` through ``parse`` (single-target jobs by default).
 
     Raises:
         IncompleteSweepError: a job is missing or failed and ``allow_incomplete`` is false.
-        ResultsError: a directory is neither kind, two finished jobs stand for the same
-            (regime, agent, evs, seed), or no job finished.
+        ResultsError: a directory is neither kind, two finished jobs stand for the same cell (their
+            ``key``), or no job finished.
     """
     if not dirs:
         raise ResultsError("no directory given")
-    jobs: list[JobResult] = []
+    jobs: list[Any] = []
     gaps: list[JobGap] = []
     expected = 0
     for d in map(Path, dirs):
         if (d / MULTIRUN_YAML).is_file():
-            more_jobs, more_gaps, n = _collect_sweep(d)
+            more_jobs, more_gaps, n = _collect_sweep(d, parse)
         elif (d / RESULTS_JSON).is_file() or (d / ".hydra").is_dir():
-            r = read_job(d, _job_overrides(d))
-            more_jobs, more_gaps, n = ([r], [], 1) if isinstance(r, JobResult) else ([], [r], 1)
+            r = read_job(d, _job_overrides(d), parse)
+            more_jobs, more_gaps, n = ([], [r], 1) if isinstance(r, JobGap) else ([r], [], 1)
         else:
             raise ResultsError(f"{d}: neither a multirun directory (no {MULTIRUN_YAML}) nor a run directory "
                                f"(no {RESULTS_JSON}, no .hydra/)")  # fmt: skip
         jobs += more_jobs
         gaps += more_gaps
         expected += n
-    by_key: dict[tuple[str, str, int, int], list[Path]] = defaultdict(list)
+    by_key: dict[tuple[Any, ...], list[Path]] = defaultdict(list)
     for job in jobs:
         by_key[job.key].append(job.job_dir)
     twice = {k: v for k, v in by_key.items() if len(v) > 1}
     if twice:
-        lines = "\n".join(f"  regime={k[0]} agent={k[1]} evs={k[2]} seed={k[3]}: {', '.join(map(str, v))}"
-                          for k, v in twice.items())  # fmt: skip
-        raise ResultsError(f"jobs stand for the same (regime, agent, evs, seed) and would be averaged "
+        names = type(jobs[0]).KEY_NAMES
+        lines = "\n".join("  " + " ".join(f"{n}={x}" for n, x in zip(names, k, strict=False)) + ": "
+                          + ", ".join(map(str, v)) for k, v in twice.items())  # fmt: skip
+        raise ResultsError(f"jobs stand for the same ({', '.join(names)}) and would be averaged "
                            f"together; pass directories without the duplicates:\n{lines}")  # fmt: skip
     if gaps and not allow_incomplete:
         raise IncompleteSweepError(gaps, expected)

@@ -1,0 +1,354 @@
+"""The fleet's results table (docs/FLEET.md): a sweep of ``scripts/train.py experiment=fleet`` over
+dispatchers, guided shares and seeds, read into one table.
+
+    python scripts/train.py -m experiment=fleet seed=0,1,2,3,4 fleet.guided_share=0.25,0.5,1.0 \\
+        agent=dueling_ddqn,dqn,central,reservation,queue_aware,greedy eval.baselines=[]
+    python scripts/make_table.py --fleet outputs/train_multirun/<time>
+
+Every job of a seed plays the same evaluation fleet episodes (the evaluation stream of the seed: same
+days, same guided EVs), so the dispatchers of a cell are paired by seed and episode. Per cell
+(EV count, guided share, dispatcher): the mean over seeds of each job's mean over its fleet episodes,
+with a Student-t interval across seeds (seeds are the independent draws of days and guided EVs), for
+the guided EVs and for ALL EVs charging in the window; and the paired differences of
+:data:`FLEET_PAIRS`: per seed the mean over episodes of A - B, then the mean over seeds with its
+t interval. Files: ``fleet_results.md``, ``fleet_results.csv`` (one row per job) and
+``fleet_results_bars.png``.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from evcd.report.figures import agent_colors, plot_results_bars
+from evcd.report.markdown import format_stat, markdown_table, num
+from evcd.report.paired import PairedStat
+from evcd.report.seed_stats import SeedStat, seed_interval
+from evcd.report.sweep import Collection, ResultsError, collect
+from evcd.utils.atomic import atomic_write_text
+
+log = logging.getLogger(__name__)
+
+MD_NAME = "fleet_results.md"
+CSV_NAME = "fleet_results.csv"
+BARS_PNG = "fleet_results_bars.png"
+#: Dispatchers in the order of the table's columns (others follow alphabetically).
+FLEET_AGENT_ORDER = ("random", "greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
+#: The paired comparisons the table reports: (A, B) for A - B.
+FLEET_PAIRS: tuple[tuple[str, str], ...] = (
+    ("dqn", "queue_aware"),
+    ("dueling_ddqn", "queue_aware"),
+    ("dqn", "reservation"),
+    ("dueling_ddqn", "reservation"),
+    ("dueling_ddqn", "dqn"),
+)
+#: The travel times of the table: the guided EVs' and everybody's charging in the window.
+MEASURES: dict[str, str] = {"guided_travel": "the guided EVs", "all_travel": "all EVs charging in the window"}
+
+
+@dataclass(frozen=True)
+class FleetJob:
+    """One finished fleet job, from its ``results.json`` (NaN where it has null)."""
+
+    KEY_NAMES: ClassVar[tuple[str, ...]] = ("regime", "evs", "guided_share", "agent", "seed")
+    regime: str
+    agent: str
+    evs: int
+    guided_share: float
+    seed: int
+    episodes: int
+    guided: int
+    truncated: int
+    guided_travel: float
+    all_travel: float
+    queue_wait: float
+    herding: float
+    train_episodes: int
+    train_transitions: int
+    train_wall_s: float
+    eval_days: tuple[int, ...]
+    job_dir: Path
+    #: per evaluation fleet episode: (episode, day, guided EVs' mean, all EVs' mean), for the pairs
+    per_episode: tuple[tuple[int, int, float, float], ...] = dataclasses.field(default=(), repr=False)
+
+    @property
+    def key(self) -> tuple[str, int, float, str, int]:
+        """``(regime, evs, guided_share, agent, seed)``: what a job stands for in the table."""
+        return self.regime, self.evs, self.guided_share, self.agent, self.seed
+
+
+def _float(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
+def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
+    """The :class:`FleetJob` of a fleet run's parsed ``results.json``.
+
+    Raises:
+        ValueError: not a fleet run; KeyError, TypeError: a field is missing or malformed.
+    """
+    if data.get("task") != "fleet":
+        raise ValueError("not a fleet run (results.json has no task: fleet): make its table without --fleet")
+    summary, config, training = data["summary"], data["config"], data.get("training") or {}
+    if not isinstance(config, Mapping):
+        raise KeyError("config")
+    episodes = data.get("episodes") or []
+    per_episode = tuple(
+        (int(e["episode"]), int(e["day"]), _float(e["guided_travel"]), _float(e["all_travel"]))
+        for e in episodes
+    )
+    return FleetJob(
+        regime=str(config.get("regime") or "unknown"),
+        agent=str(data["agent"]),
+        evs=int(config["evs"]),
+        guided_share=float(config["fleet"]["guided_share"]),
+        seed=int(data["seed"]),
+        episodes=int(summary["episodes"]),
+        guided=int(summary["guided"]),
+        truncated=int(summary["truncated"]),
+        guided_travel=_float(summary["guided_travel"]),
+        all_travel=_float(summary["all_travel"]),
+        queue_wait=_float(summary.get("queue_wait")),
+        herding=_float(summary.get("herding")),
+        train_episodes=int(training.get("episodes", 0)),
+        train_transitions=int(training.get("transitions", 0)),
+        train_wall_s=_float(training.get("wall_s", 0.0)),
+        eval_days=tuple(sorted({d for _, d, _, _ in per_episode})),
+        job_dir=job_dir,
+        per_episode=per_episode,
+    )
+
+
+def _rank(agent: str) -> tuple[int, str]:
+    return (FLEET_AGENT_ORDER.index(agent) if agent in FLEET_AGENT_ORDER else len(FLEET_AGENT_ORDER), agent)
+
+
+def sort_key(job: FleetJob) -> tuple[Any, ...]:
+    """Rows are sorted by regime, EV count, guided share, dispatcher, seed."""
+    return job.regime, job.evs, job.guided_share, _rank(job.agent), job.seed
+
+
+Cell = tuple[str, int, float]  # (regime, evs, guided_share)
+
+
+def _cells(jobs: Sequence[FleetJob]) -> list[Cell]:
+    return sorted({(j.regime, j.evs, j.guided_share) for j in jobs})
+
+
+def cell_stat(jobs: Sequence[FleetJob], cell: Cell, agent: str, measure: str) -> SeedStat:
+    """Mean over seeds of ``agent``'s ``measure`` in ``cell`` with its t interval across seeds."""
+    return seed_interval(getattr(j, measure) for j in jobs if (j.regime, j.evs, j.guided_share) == cell
+                         and j.agent == agent)  # fmt: skip
+
+
+def paired_fleet(jobs: Sequence[FleetJob], cell: Cell, a: str, b: str, measure: str) -> PairedStat | None:
+    """``a`` minus ``b`` in ``cell`` on ``measure``, paired by episode within each seed (the same
+    evaluation fleet episodes: same index and day), then over seeds (``None`` if no seed has both)."""
+    column = {"guided_travel": 2, "all_travel": 3}[measure]
+    by = {(j.agent, j.seed): j for j in jobs if (j.regime, j.evs, j.guided_share) == cell}
+    per_seed: dict[int, float] = {}
+    pairs = a_lower = b_lower = 0
+    for seed in sorted({s for x, s in by if x == a} & {s for x, s in by if x == b}):
+        values_b = {(e[0], e[1]): e[column] for e in by[b, seed].per_episode}
+        both = [
+            (e[column], values_b[e[0], e[1]]) for e in by[a, seed].per_episode if (e[0], e[1]) in values_b
+        ]
+        diffs = [x - y for x, y in both if math.isfinite(x) and math.isfinite(y)]
+        if not diffs:
+            continue
+        per_seed[seed] = float(np.mean(diffs))
+        pairs += len(diffs)
+        a_lower += sum(d < 0 for d in diffs)
+        b_lower += sum(d > 0 for d in diffs)
+    if not per_seed:
+        return None
+    return PairedStat(seed_interval(per_seed.values()), per_seed, pairs, a_lower, b_lower)
+
+
+def _nanmean(values: Sequence[float]) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.mean(finite)) if finite else math.nan
+
+
+def _signed(stat: SeedStat) -> str:
+    if stat.n == 0:
+        return "—"
+    interval = f" [{stat.low:+.1f}, {stat.high:+.1f}]" if stat.n > 1 else ""
+    return f"{stat.mean:+.1f}{interval}"
+
+
+def _cell_label(cell: Cell, regimes: int) -> list[str]:
+    return [*([cell[0]] if regimes > 1 else []), str(cell[1]), f"{cell[2]:g}"]
+
+
+def fleet_markdown(collection: Collection) -> str:
+    """The table's Markdown: settings, the two travel times per cell, the pairs, per-job details."""
+    jobs: list[FleetJob] = list(collection.jobs)
+    cells = _cells(jobs)
+    agents = sorted({j.agent for j in jobs}, key=_rank)
+    regimes = len({c[0] for c in cells})
+    head = [*(["regime"] if regimes > 1 else []), "EVs", "guided share"]
+    seeds = sorted({j.seed for j in jobs})
+    days = sorted({d for j in jobs for d in j.eval_days})
+    lines = [
+        "## The fleet table",
+        "",
+        f"{len(jobs)} jobs from {', '.join(map(str, collection.sources))}; seeds {seeds}; "
+        f"{sorted({j.episodes for j in jobs})} evaluation fleet episodes per job on days {days}.",
+        "",
+    ]
+    if collection.gaps:
+        lines += [
+            "Jobs that did not finish (left out):",
+            "",
+            *(f"- {g.describe()}" for g in collection.gaps),
+            "",
+        ]
+    for measure, label in MEASURES.items():
+        rows = [[*_cell_label(c, regimes), *(format_stat(cell_stat(jobs, c, a, measure)) for a in agents)]
+                for c in cells]  # fmt: skip
+        lines += [
+            f"### Mean travel time of {label} (s)",
+            "",
+            "Per job the mean over its fleet episodes of the episode's mean; mean over seeds [95% Student-t "
+            "interval across seeds].",
+            "",
+            *markdown_table([*head, *agents], rows),
+            "",
+        ]
+    pairs = [(a, b) for a, b in FLEET_PAIRS if a in agents and b in agents]
+    if pairs:
+        for measure, label in MEASURES.items():
+            rows, per_seed = [], []
+            for c in cells:
+                cells_out = []
+                for a, b in pairs:
+                    p = paired_fleet(jobs, c, a, b, measure)
+                    if p is None:
+                        cells_out.append("—")
+                        continue
+                    cells_out.append(
+                        f"{_signed(p.stat)} n={p.stat.n}; {p.a_faster} / {p.b_faster} of {p.pairs}"
+                    )
+                    spread = " / ".join(f"{s}: {d:+.1f}" for s, d in p.per_seed.items())
+                    per_seed.append([f"{a} - {b}", *_cell_label(c, regimes), spread])
+                rows.append([*_cell_label(c, regimes), *cells_out])
+            lines += [
+                f"### Paired differences on {label} (s)",
+                "",
+                "A - B on the same fleet episodes: per seed the mean over episodes of the difference of the "
+                "episode means, then the mean over seeds [95% Student-t interval across seeds]; then in how "
+                "many episode pairs A was lower / B was lower. Negative: A is faster.",
+                "",
+                *markdown_table([*head, *(f"{a} - {b}" for a, b in pairs)], rows),
+                "",
+                *markdown_table(["pair", *head, "per seed (seed: mean difference, s)"], per_seed),
+                "",
+            ]
+    rows = []
+    for c in cells:
+        for a in agents:
+            group = [j for j in jobs if (j.regime, j.evs, j.guided_share) == c and j.agent == a]
+            if not group:
+                continue
+            trained = sum(j.train_episodes for j in group)
+            steps, minutes = sum(j.train_transitions for j in group), sum(j.train_wall_s for j in group) / 60
+            rows.append([
+                *_cell_label(c, regimes), a, str(len(group)),
+                f"{sum(j.truncated for j in group)} of {sum(j.guided for j in group)}",
+                num(_nanmean([j.herding for j in group]), 2), num(_nanmean([j.queue_wait for j in group])),
+                f"{trained} / {steps} / {num(minutes)}" if trained else "—",
+            ])  # fmt: skip
+    lines += [
+        "### Per dispatcher",
+        "",
+        "Over the seeds of each cell: guided EVs truncated, the mean herding (largest share of the guided "
+        "EVs of a 10-minute bin sent to one station) and queue wait (s), and for learners the training "
+        "episodes / agent steps / minutes, summed over seeds.",
+        "",
+        *markdown_table(
+            [*head, "dispatcher", "seeds", "truncated", "herding", "queue wait", "training"], rows
+        ),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+CSV_COLUMNS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(FleetJob) if f.repr)
+
+
+def fleet_csv_text(jobs: Sequence[FleetJob]) -> str:
+    """One row per job (columns :data:`CSV_COLUMNS`); NaN as ``nan``."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(CSV_COLUMNS)
+    for job in jobs:
+        row = []
+        for name in CSV_COLUMNS:
+            value = getattr(job, name)
+            row.append(" ".join(map(str, value)) if isinstance(value, tuple) else value)
+        writer.writerow(row)
+    return buf.getvalue()
+
+
+@dataclass(frozen=True)
+class FleetTableOutputs:
+    """What :func:`make_fleet_table` wrote, and the collection it was made of."""
+
+    markdown: str
+    paths: tuple[Path, ...]
+    collection: Collection
+
+
+def make_fleet_table(
+    dirs: Sequence[str | Path],
+    out_dir: str | Path | None = None,
+    overwrite: bool = False,
+    allow_incomplete: bool = False,
+) -> FleetTableOutputs:
+    """Collect the fleet jobs of ``dirs``; write ``fleet_results.md``, ``fleet_results.csv`` and
+    ``fleet_results_bars.png`` into ``out_dir`` (default: the first of ``dirs``).
+
+    Raises:
+        IncompleteSweepError, ResultsError: see :func:`evcd.report.sweep.collect` (a single-target job
+            is a failed job here).
+        FileExistsError: an output exists and ``overwrite`` is false (checked before anything is read).
+    """
+    if not dirs:
+        raise ResultsError("no directory given")
+    out = Path(out_dir) if out_dir is not None else Path(dirs[0])
+    existing = [str(out / n) for n in (MD_NAME, CSV_NAME, BARS_PNG) if (out / n).exists()]
+    if existing and not overwrite:
+        raise FileExistsError(f"refusing to overwrite {', '.join(existing)} (pass overwrite / --overwrite)")
+    collection = collect(dirs, allow_incomplete, parse=fleet_job)
+    collection = dataclasses.replace(collection, jobs=tuple(sorted(collection.jobs, key=sort_key)))
+    jobs: list[FleetJob] = list(collection.jobs)
+    out.mkdir(parents=True, exist_ok=True)
+    markdown = fleet_markdown(collection)
+    paths = [
+        atomic_write_text(out / MD_NAME, markdown),
+        atomic_write_text(out / CSV_NAME, fleet_csv_text(jobs)),
+    ]
+    agents = sorted({j.agent for j in jobs}, key=_rank)
+    stats: dict[str, dict[str, dict[float, SeedStat]]] = {}
+    for regime, evs, share in _cells(jobs):
+        panel = stats.setdefault(f"{regime}, {evs} EVs", {})
+        for a in agents:
+            stat = cell_stat(jobs, (regime, evs, share), a, "guided_travel")
+            if stat.n:
+                panel.setdefault(a, {})[share] = stat
+    title = "Fleet: guided EVs' mean travel time, mean over seeds, 95% interval across seeds (Student t)"
+    paths.append(plot_results_bars(stats, out / BARS_PNG, colors=agent_colors(agents), title=title,
+                                   xlabel="guided share"))  # fmt: skip
+    for path in paths:
+        log.info("wrote %s", path)
+    return FleetTableOutputs(markdown, tuple(paths), collection)

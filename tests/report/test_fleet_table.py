@@ -1,0 +1,189 @@
+"""The fleet table (evcd.report.fleet_table, ``scripts/make_table.py --fleet``) on a synthetic sweep of
+fleet runs (no SUMO), with every mean, interval and paired difference computed here by hand."""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import math
+import statistics
+from pathlib import Path
+
+import matplotlib.image
+import pytest
+import yaml
+
+from evcd.report.fleet_table import BARS_PNG, CSV_NAME, MD_NAME, fleet_job, make_fleet_table, paired_fleet
+from evcd.report.sweep import IncompleteSweepError, ResultsError, collect
+from tests.conftest import run_script
+from tests.report.test_make_table import results_json as single_results_json
+
+T_0975_2 = 4.302652729749464  # Student t, 97.5% quantile, 2 degrees of freedom
+
+AGENTS = ("queue_aware", "reservation", "dqn", "dueling_ddqn")
+SEEDS = (0, 1, 2)
+SHARES = (0.5, 1.0)
+BASE = {
+    ("queue_aware", 0.5): 300.0, ("reservation", 0.5): 320.0, ("dqn", 0.5): 310.0,
+    ("dueling_ddqn", 0.5): 290.0, ("queue_aware", 1.0): 700.0, ("reservation", 1.0): 650.0,
+    ("dqn", 1.0): 640.0, ("dueling_ddqn", 1.0): 600.0,
+}  # fmt: skip
+SPREAD = (-5.0, 0.0, 5.0)
+#: per-seed noise of the learners, so that their paired differences have a real interval
+NOISE = {"dqn": (3.0, -1.0, -2.0), "dueling_ddqn": (-4.0, 0.0, 4.0)}
+#: per episode (two a job) around the job's mean
+OFFSETS = (-10.0, 10.0)
+
+
+def guided(agent: str, share: float, seed: int, episode: int) -> float:
+    return BASE[agent, share] + SPREAD[seed] + NOISE.get(agent, (0.0,) * 3)[seed] + OFFSETS[episode]
+
+
+def fleet_results(agent: str, share: float, seed: int) -> dict:
+    """A results.json as ``scripts/train.py experiment=fleet`` writes it (the fields the table reads)."""
+    episodes = [{"episode": i, "day": 101 + (seed + i) % 2, "transitions": 100, "wall_s": 20.0, "guided": 10,
+                 "guided_charged": 10, "truncated": 0, "guided_travel": guided(agent, share, seed, i),
+                 "queue_wait": 30.0, "all_evs": 20, "all_unfinished": 0,
+                 "all_travel": guided(agent, share, seed, i) + 100.0, "herding": 0.5, "switches": 0.1}
+                for i in range(2)]  # fmt: skip
+    mean = statistics.mean(e["guided_travel"] for e in episodes)
+    learns = agent in ("dqn", "dueling_ddqn")
+    return {
+        "task": "fleet",
+        "agent": agent,
+        "seed": seed,
+        "summary": {
+            "episodes": 2,
+            "seed": seed,
+            "guided_travel": mean,
+            "guided_travel_ci": [mean - 9, mean + 9],
+            "all_travel": mean + 100.0,
+            "all_travel_ci": [0, 0],
+            "queue_wait": 30.0,
+            "herding": 0.5,
+            "guided": 20,
+            "truncated": 1 if agent == "reservation" else 0,
+            "all_unfinished": 0,
+            "transitions": 200,
+            "mean_wall_s": 20.0,
+        },
+        "episodes": episodes,
+        "baselines": {},
+        "training": {
+            "episodes": 60 if learns else 0,
+            "transitions": 9000 if learns else 0,
+            "wall_s": 1500.0 if learns else 0.0,
+        },
+        "config": {"regime": "fleet", "evs": 400, "seed": seed, "fleet": {"guided_share": share}},
+    }
+
+
+def write_fleet_sweep(root: Path, agents: tuple[str, ...] = AGENTS) -> Path:
+    root.mkdir(parents=True)
+    task = ["experiment=fleet", f"agent={','.join(agents)}", f"seed={','.join(map(str, SEEDS))}",
+            f"fleet.guided_share={','.join(map(str, SHARES))}"]  # fmt: skip
+    (root / "multirun.yaml").write_text(yaml.safe_dump({"hydra": {"overrides": {"task": task}}}))
+    for num, (agent, seed, share) in enumerate(itertools.product(agents, SEEDS, SHARES)):
+        job = root / f"{num}_{agent}_share{share}_seed{seed}"
+        (job / ".hydra").mkdir(parents=True)
+        overrides = ["experiment=fleet", f"agent={agent}", f"seed={seed}", f"fleet.guided_share={share}"]
+        (job / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump(overrides))
+        (job / "results.json").write_text(json.dumps(fleet_results(agent, share, seed)))
+    return root
+
+
+def row(markdown: str, title: str, first: list[str]) -> dict[str, str]:
+    """The row starting with ``first`` of the table that follows the heading ``title``."""
+    lines = markdown.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(title))
+    header_at = next(i for i in range(start, len(lines)) if lines[i].startswith("| "))
+    header = [c.strip() for c in lines[header_at].strip("|").split("|")]
+    for line in lines[header_at + 2 :]:
+        if not line.startswith("| "):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if cells[: len(first)] == first:
+            return dict(zip(header, cells, strict=True))
+    raise AssertionError(f"no row {first} under {title}")
+
+
+def test_the_fleet_table_by_hand(tmp_path) -> None:
+    sweep = write_fleet_sweep(tmp_path / "sweep")
+    out = make_fleet_table([sweep], tmp_path / "out")
+    md = out.markdown
+    assert len(out.collection.jobs) == len(AGENTS) * len(SEEDS) * len(SHARES) and not out.collection.gaps
+    # the cell: mean over seeds of the jobs' means, t interval across seeds
+    half = T_0975_2 * 5.0 / math.sqrt(3)  # SPREAD's sd is 5
+    cell = row(md, "### Mean travel time of the guided EVs", ["400", "0.5"])
+    assert cell["queue_aware"] == f"300.0 [{300 - half:.1f}, {300 + half:.1f}] n=3"
+    everybody = row(md, "### Mean travel time of all EVs", ["400", "1"])
+    assert everybody["reservation"].startswith("750.0 [")
+    # paired by seed and episode: dqn - queue_aware = base difference + the learner's noise per seed
+    noise = NOISE["dqn"]
+    sd = statistics.stdev(noise)
+    pair = row(md, "### Paired differences on the guided EVs", ["400", "1"])
+    low, high = -60.0 - T_0975_2 * sd / math.sqrt(3), -60.0 + T_0975_2 * sd / math.sqrt(3)
+    assert pair["dqn - queue_aware"] == f"-60.0 [{low:+.1f}, {high:+.1f}] n=3; 6 / 0 of 6"
+    p = paired_fleet(list(out.collection.jobs), ("fleet", 400, 1.0), "dueling_ddqn", "dqn", "guided_travel")
+    expected = {s: -40.0 + NOISE["dueling_ddqn"][s] - NOISE["dqn"][s] for s in SEEDS}
+    assert p is not None and p.per_seed == pytest.approx(expected) and p.pairs == 6
+    # all EVs: the same differences (all_travel = guided + 100 here)
+    assert (
+        row(md, "### Paired differences on all EVs", ["400", "1"])["dqn - queue_aware"]
+        == pair["dqn - queue_aware"]
+    )
+    detail = row(md, "### Per dispatcher", ["400", "0.5", "reservation"])
+    assert detail["truncated"] == "3 of 60" and detail["training"] == "—"
+    assert row(md, "### Per dispatcher", ["400", "0.5", "dqn"])["training"] == "180 / 27000 / 75.0"
+    # the csv: one row per job; the figure is a real PNG
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "out" / CSV_NAME).read_text())))
+    assert len(rows) == 24 and {r["eval_days"] for r in rows} == {"101 102"}
+    assert (tmp_path / "out" / MD_NAME).read_text() == md
+    assert matplotlib.image.imread(tmp_path / "out" / BARS_PNG).shape[0] > 300
+    with pytest.raises(FileExistsError, match="refusing to overwrite"):
+        make_fleet_table([sweep], tmp_path / "out")
+
+
+def test_a_nan_episode_is_left_out_of_its_pairs(tmp_path) -> None:
+    sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware", "dqn"))
+    (job,) = sweep.glob("*_dqn_share1.0_seed0")
+    data = json.loads((job / "results.json").read_text())
+    data["episodes"][1]["guided_travel"] = None  # nobody charged in it
+    (job / "results.json").write_text(json.dumps(data))
+    parsed = fleet_job(data, job)
+    assert math.isnan(parsed.per_episode[1][2])
+    jobs = list(collect([sweep], parse=fleet_job).jobs)
+    p = paired_fleet(jobs, ("fleet", 400, 1.0), "dqn", "queue_aware", "guided_travel")
+    assert p is not None and p.pairs == 5
+    assert p.per_seed[0] == pytest.approx(guided("dqn", 1.0, 0, 0) - guided("queue_aware", 1.0, 0, 0))
+
+
+def test_a_single_target_job_is_not_a_fleet_job_and_the_reverse(tmp_path) -> None:
+    sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware",))
+    (job,) = sweep.glob("*_share0.5_seed1")
+    (job / "results.json").write_text(json.dumps(single_results_json("greedy", 300, 1)))
+    with pytest.raises(IncompleteSweepError, match="not a fleet run"):
+        make_fleet_table([sweep], tmp_path / "out")
+    with pytest.raises(IncompleteSweepError, match=r"make_table\.py --fleet"):
+        collect([sweep])  # the single-target table refuses the fleet jobs, naming the flag
+    out = make_fleet_table([sweep], tmp_path / "out", allow_incomplete=True)
+    assert len(out.collection.gaps) == 1 and "Jobs that did not finish" in out.markdown
+
+
+def test_two_jobs_of_one_cell_are_refused(tmp_path) -> None:
+    a = write_fleet_sweep(tmp_path / "a", agents=("queue_aware",))
+    b = write_fleet_sweep(tmp_path / "b", agents=("queue_aware",))
+    with pytest.raises(ResultsError, match=r"guided_share=0\.5"):
+        make_fleet_table([a, b], tmp_path / "out")
+
+
+def test_make_table_fleet_on_the_command_line(tmp_path) -> None:
+    sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware", "dueling_ddqn"))
+    proc = run_script("make_table.py", "--fleet", str(sweep), "--out", str(tmp_path / "out"), timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "### Paired differences on the guided EVs" in proc.stdout
+    assert (tmp_path / "out" / BARS_PNG).exists()
+    proc = run_script("make_table.py", str(sweep), "--out", str(tmp_path / "single"), timeout=300)
+    assert proc.returncode == 1 and "make_table.py --fleet" in proc.stderr
