@@ -97,19 +97,26 @@ def _window(cfg: DictConfig) -> dict[str, Any]:
     return {"departure_window": tuple(window)} if window is not None else {}
 
 
+def _settings(cfg: DictConfig, seed: int, min_episodes: int) -> dict[str, Any]:
+    """The settings both trainers take (:class:`TrainSettings`, :class:`FleetTrainSettings`), checked."""
+    return {
+        "episodes": check_int("train.episodes", cfg.train.episodes, minimum=min_episodes),
+        "eval_episodes": check_int("eval.episodes", cfg.eval.episodes, minimum=1),
+        "seed": seed,
+        "checkpoint_every": check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
+        "progress": bool(cfg.progress),
+        "resamples": check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
+        "validation": ValidationSettings(cfg.train.validation.every, cfg.train.validation.episodes),
+    }
+
+
 def build(cfg: DictConfig) -> dict[str, Any]:
     """Everything the run needs, checked before any simulation starts."""
     seed = check_int("seed", cfg.seed, minimum=0)
     train_days, eval_days = _days(cfg, seed)
     settings = TrainSettings(
-        episodes=check_int("train.episodes", cfg.train.episodes, minimum=0),
-        eval_episodes=check_int("eval.episodes", cfg.eval.episodes, minimum=1),
-        seed=seed,
-        checkpoint_every=check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
-        progress=bool(cfg.progress),
+        **_settings(cfg, seed, min_episodes=0),
         log_window=check_int("train.log_window", cfg.train.log_window, minimum=1),
-        resamples=check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
-        validation=ValidationSettings(cfg.train.validation.every, cfg.train.validation.episodes),
         rotate_days=len(train_days) if bool(cfg.train.rotate_days) else 0,
     )
     check_int("torch_threads", cfg.torch_threads, minimum=1)
@@ -154,15 +161,7 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
     """``task=fleet``: everything the fleet run needs, checked before any simulation starts."""
     seed = check_int("seed", cfg.seed, minimum=0)
     train_days, eval_days = _days(cfg, seed)
-    settings = FleetTrainSettings(
-        episodes=check_int("train.episodes", cfg.train.episodes, minimum=1),
-        eval_episodes=check_int("eval.episodes", cfg.eval.episodes, minimum=1),
-        seed=seed,
-        checkpoint_every=check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
-        progress=bool(cfg.progress),
-        resamples=check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
-        validation=ValidationSettings(cfg.train.validation.every, cfg.train.validation.episodes),
-    )
+    settings = FleetTrainSettings(**_settings(cfg, seed, min_episodes=1))
     check_int("torch_threads", cfg.torch_threads, minimum=1)
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = str(params.pop("name"))

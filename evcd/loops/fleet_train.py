@@ -52,23 +52,20 @@ from evcd.loops.curves import plot_learning_curve
 from evcd.loops.fleet import FleetEpisode, evaluate_fleet, play_fleet
 from evcd.loops.fleet_figure import plot_fleet_traces
 from evcd.loops.run_files import (
-    CHECKPOINTS,
     CURVE_PNG,
     FLEET_CSV,
     FLEET_PNG,
     FLEET_TRAIN_CSV,
     RESULTS_JSON,
-    TENSORBOARD,
     baseline_csv,
     rows_csv_text,
 )
 from evcd.loops.seeds import TRAIN_STREAM, VALIDATION_STREAM, bootstrap_rng, episode_spec
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, paired_values
 from evcd.loops.train_log import TrainLog
-from evcd.loops.train_state import check_run_dir, restore_training, save_training
+from evcd.loops.train_state import save_training, start_run, training_counters
 from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings
 from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
-from evcd.utils.checkpoint import has_checkpoint
 from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
@@ -266,18 +263,9 @@ def train_and_evaluate_fleet(
         CheckpointError: the checkpoint is damaged or not a fleet training checkpoint.
     """
     run_dir = Path(run_dir)
-    check_run_dir(run_dir, resume)
-    if resume and (run_dir / RESULTS_JSON).exists():
-        raise FileExistsError(f"{run_dir / RESULTS_JSON} exists: that run is complete (nothing to resume)")
-    run_dir.mkdir(parents=True, exist_ok=True)
+    state, tlog = start_run(run_dir, agent, resume, config, FleetTrainState)
     episodes = settings.episodes if agent.learns else 0
-    state = FleetTrainState()
-    if agent.learns and resume and has_checkpoint(run_dir / CHECKPOINTS):
-        state = restore_training(run_dir, agent, config, FleetTrainState)
-    tlog = TrainLog(run_dir / TENSORBOARD, purge_step=state.transitions if resume else None)
     try:
-        if not resume:
-            tlog.config(config or {}, repr(agent))
         if episodes and state.episodes_done < episodes:
             validator = None
             if settings.validation.every:
@@ -319,19 +307,8 @@ def _evaluate(
 
 
 def _training_summary(agent: Agent, state: FleetTrainState, episodes: int) -> dict[str, Any]:
-    stats = agent.stats()
     return {
-        "episodes": episodes,
-        "episodes_done": state.episodes_done,
-        "transitions": state.transitions,
-        "wall_s": state.wall_s,
-        "day_build_s": state.prepare_s,
-        "sessions": state.sessions,
-        "transitions_per_second": state.transitions / state.wall_s if state.wall_s > 0 else math.nan,
-        "gradient_steps": int(stats.get("gradient_steps", 0)),
-        "target_updates": int(stats.get("target_updates", 0)),
-        "final_epsilon": stats.get("epsilon", math.nan),
-        "validation_s": state.validation_s,
+        **training_counters(agent.stats(), state, episodes),
         "mean_guided_travel": _mean([float(r["guided_travel"]) for r in state.rows]),
     }
 

@@ -47,11 +47,9 @@ from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
 from evcd.loops.progress import EpisodeProgress
 from evcd.loops.run_files import (
-    CHECKPOINTS,
     CURVE_PNG,
     EVAL_CSV,
     RESULTS_JSON,
-    TENSORBOARD,
     TRAIN_CSV,
     baseline_csv,
     episodes_csv_text,
@@ -60,10 +58,9 @@ from evcd.loops.run_files import (
 from evcd.loops.seeds import TRAIN_STREAM, bootstrap_rng, episode_specs
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult, paired_difference
 from evcd.loops.train_log import TrainLog
-from evcd.loops.train_state import TrainState, check_run_dir, restore_training, save_training
+from evcd.loops.train_state import TrainState, save_training, start_run, training_counters
 from evcd.loops.validation import ValidationSettings, Validator
 from evcd.utils.atomic import atomic_write_json, atomic_write_text
-from evcd.utils.checkpoint import has_checkpoint
 from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
@@ -221,18 +218,9 @@ def train_and_evaluate(
         CheckpointError: the checkpoint is corrupted or does not fit the agent.
     """
     run_dir = Path(run_dir)
-    check_run_dir(run_dir, resume)
-    if resume and (run_dir / RESULTS_JSON).exists():
-        raise FileExistsError(f"{run_dir / RESULTS_JSON} exists: that run is complete (nothing to resume)")
-    run_dir.mkdir(parents=True, exist_ok=True)
+    state, tlog = start_run(run_dir, agent, resume, config, TrainState)
     episodes = settings.episodes if agent.learns else 0
-    state = TrainState()
-    if agent.learns and resume and has_checkpoint(run_dir / CHECKPOINTS):
-        state = restore_training(run_dir, agent, config)
-    tlog = TrainLog(run_dir / TENSORBOARD, purge_step=state.transitions if resume else None)
     try:
-        if not resume:
-            tlog.config(config or {}, repr(agent))
         if episodes and state.episodes_done < episodes:
             validator = None
             if settings.validation.every:
@@ -273,17 +261,7 @@ def _training_summary(agent: Dispatcher, state: TrainState, episodes: int) -> di
     stats = agent.stats() if isinstance(agent, Agent) else {}
     charged = [r.travel_time for r in state.rows if not r.truncated]
     return {
-        "episodes": episodes,
-        "episodes_done": state.episodes_done,
-        "transitions": state.transitions,
-        "wall_s": state.wall_s,
-        "day_build_s": state.prepare_s,
-        "sessions": state.sessions,
-        "transitions_per_second": state.transitions / state.wall_s if state.wall_s > 0 else math.nan,
-        "gradient_steps": int(stats.get("gradient_steps", 0)),
-        "target_updates": int(stats.get("target_updates", 0)),
-        "final_epsilon": stats.get("epsilon", math.nan),
-        "validation_s": state.validation_s,
+        **training_counters(stats, state, episodes),
         "truncated": sum(r.truncated for r in state.rows),
         "mean_travel_time": float(np.mean(charged)) if charged else math.nan,
         "mean_switches": float(np.mean([r.switches for r in state.rows])) if state.rows else math.nan,

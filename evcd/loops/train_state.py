@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +20,8 @@ from typing import Any, ClassVar, Protocol, TypeVar
 
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRow
-from evcd.loops.run_files import CHECKPOINTS, OUTPUTS, RESULTS_JSON
+from evcd.loops.run_files import CHECKPOINTS, OUTPUTS, RESULTS_JSON, TENSORBOARD
+from evcd.loops.train_log import TrainLog
 from evcd.loops.validation import ValidationRecord
 from evcd.utils.checkpoint import CheckpointError, has_checkpoint, load_checkpoint, save_checkpoint
 
@@ -72,6 +74,49 @@ class TrainState:
         values["rows"] = [EpisodeRow(**r) for r in values["rows"]]
         values["validation"] = ValidationRecord.from_dict(values.get("validation"))
         return cls(**values)
+
+
+def training_counters(stats: Mapping[str, Any], state: Any, episodes: int) -> dict[str, Any]:
+    """What every trainer reports of its training in ``results.json`` (``training``): ``state`` (a
+    :class:`TrainState` or the fleet's) and the agent's :meth:`~evcd.agents.Agent.stats`."""
+    return {
+        "episodes": episodes,
+        "episodes_done": state.episodes_done,
+        "transitions": state.transitions,
+        "wall_s": state.wall_s,
+        "day_build_s": state.prepare_s,
+        "sessions": state.sessions,
+        "transitions_per_second": state.transitions / state.wall_s if state.wall_s > 0 else math.nan,
+        "gradient_steps": int(stats.get("gradient_steps", 0)),
+        "target_updates": int(stats.get("target_updates", 0)),
+        "final_epsilon": stats.get("epsilon", math.nan),
+        "validation_s": state.validation_s,
+    }
+
+
+def start_run(
+    run_dir: Path, agent: Any, resume: bool, config: Mapping[str, Any] | None, state_cls: type[S]
+) -> tuple[S, TrainLog]:
+    """Enter ``run_dir`` for a new run or to resume one: the trainer's position (the checkpoint's with
+    ``resume`` and an ``agent`` that learns, else a fresh ``state_cls()``) and the run's TensorBoard log
+    (a resumed run hides what the interrupted one wrote after its checkpoint; a new one records the
+    config). The caller closes the log.
+
+    Raises:
+        FileExistsError, FileNotFoundError: see :func:`check_run_dir`; or a resume of a complete run.
+        ValueError, CheckpointError: see :func:`restore_training`.
+    """
+    check_run_dir(run_dir, resume)
+    if resume and (run_dir / RESULTS_JSON).exists():
+        raise FileExistsError(f"{run_dir / RESULTS_JSON} exists: that run is complete (nothing to resume)")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    state = state_cls()
+    if agent.learns and resume and has_checkpoint(run_dir / CHECKPOINTS):
+        state = restore_training(run_dir, agent, config, state_cls)
+    tlog = TrainLog(run_dir / TENSORBOARD, purge_step=state.transitions if resume else None)  # type: ignore[attr-defined]
+    if not resume:
+        tlog.config(config or {}, repr(agent))
+    return state, tlog
 
 
 def check_run_dir(run_dir: Path, resume: bool) -> None:

@@ -31,7 +31,7 @@ import numpy as np
 
 from evcd.report.figures import agent_colors, plot_results_bars
 from evcd.report.markdown import format_stat, markdown_table, num
-from evcd.report.paired import PairedStat
+from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.sweep import Collection, ResultsError, collect
 from evcd.utils.atomic import atomic_write_text
@@ -155,35 +155,19 @@ def paired_fleet(jobs: Sequence[FleetJob], cell: Cell, a: str, b: str, measure: 
     evaluation fleet episodes: same index and day), then over seeds (``None`` if no seed has both)."""
     column = {"guided_travel": 2, "all_travel": 3}[measure]
     by = {(j.agent, j.seed): j for j in jobs if (j.regime, j.evs, j.guided_share) == cell}
-    per_seed: dict[int, float] = {}
-    pairs = a_lower = b_lower = 0
+    diffs: dict[int, list[float]] = {}
     for seed in sorted({s for x, s in by if x == a} & {s for x, s in by if x == b}):
         values_b = {(e[0], e[1]): e[column] for e in by[b, seed].per_episode}
         both = [
             (e[column], values_b[e[0], e[1]]) for e in by[a, seed].per_episode if (e[0], e[1]) in values_b
         ]
-        diffs = [x - y for x, y in both if math.isfinite(x) and math.isfinite(y)]
-        if not diffs:
-            continue
-        per_seed[seed] = float(np.mean(diffs))
-        pairs += len(diffs)
-        a_lower += sum(d < 0 for d in diffs)
-        b_lower += sum(d > 0 for d in diffs)
-    if not per_seed:
-        return None
-    return PairedStat(seed_interval(per_seed.values()), per_seed, pairs, a_lower, b_lower)
+        diffs[seed] = [x - y for x, y in both if math.isfinite(x) and math.isfinite(y)]
+    return paired_stat(diffs)
 
 
 def _nanmean(values: Sequence[float]) -> float:
     finite = [v for v in values if math.isfinite(v)]
     return float(np.mean(finite)) if finite else math.nan
-
-
-def _signed(stat: SeedStat) -> str:
-    if stat.n == 0:
-        return "—"
-    interval = f" [{stat.low:+.1f}, {stat.high:+.1f}]" if stat.n > 1 else ""
-    return f"{stat.mean:+.1f}{interval}"
 
 
 def _cell_label(cell: Cell, regimes: int) -> list[str]:
@@ -236,9 +220,7 @@ def fleet_markdown(collection: Collection) -> str:
                     if p is None:
                         cells_out.append("—")
                         continue
-                    cells_out.append(
-                        f"{_signed(p.stat)} n={p.stat.n}; {p.a_faster} / {p.b_faster} of {p.pairs}"
-                    )
+                    cells_out.append(paired_cell(p))
                     spread = " / ".join(f"{s}: {d:+.1f}" for s, d in p.per_seed.items())
                     per_seed.append([f"{a} - {b}", *_cell_label(c, regimes), spread])
                 rows.append([*_cell_label(c, regimes), *cells_out])

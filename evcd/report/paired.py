@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,21 +50,23 @@ def paired_by_seed(jobs: Sequence[JobResult], regime: str, evs: int, a: str, b: 
     """``a`` minus ``b`` at ``evs`` in ``regime``, paired by episode within each seed (``None`` if no
     seed has both)."""
     by = {(j.agent, j.seed): j for j in jobs if j.regime == regime and j.evs == evs}
-    per_seed: dict[int, float] = {}
-    pairs = a_faster = b_faster = 0
+    diffs: dict[int, list[float]] = {}
     for seed in sorted({s for agent, s in by if agent == a} & {s for agent, s in by if agent == b}):
         times_b = dict(by[b, seed].episode_travel)
-        diffs = [ta - times_b[k] for k, ta in by[a, seed].episode_travel
-                 if k in times_b and math.isfinite(ta) and math.isfinite(times_b[k])]  # fmt: skip
-        if not diffs:
-            continue
-        per_seed[seed] = float(np.mean(diffs))
-        pairs += len(diffs)
-        a_faster += sum(d < 0 for d in diffs)
-        b_faster += sum(d > 0 for d in diffs)
+        diffs[seed] = [ta - times_b[k] for k, ta in by[a, seed].episode_travel
+                       if k in times_b and math.isfinite(ta) and math.isfinite(times_b[k])]  # fmt: skip
+    return paired_stat(diffs)
+
+
+def paired_stat(diffs: Mapping[int, Sequence[float]]) -> PairedStat | None:
+    """The :class:`PairedStat` of per-seed episode differences (seed -> A - B per episode; a seed
+    without any is left out; ``None`` if no seed has one)."""
+    per_seed = {seed: float(np.mean(d)) for seed, d in diffs.items() if len(d)}
     if not per_seed:
         return None
-    return PairedStat(seed_interval(per_seed.values()), per_seed, pairs, a_faster, b_faster)
+    every = [x for seed in per_seed for x in diffs[seed]]
+    return PairedStat(seed_interval(per_seed.values()), per_seed, len(every), sum(x < 0 for x in every),
+                      sum(x > 0 for x in every))  # fmt: skip
 
 
 def day_rows(jobs: Sequence[JobResult]) -> dict[tuple[str, str, int], list[tuple[int, int, float]]]:
@@ -78,6 +80,13 @@ def day_rows(jobs: Sequence[JobResult]) -> dict[tuple[str, str, int], list[tuple
 
 def _signed(x: float) -> str:
     return f"{x:+.1f}" if math.isfinite(x) else "—"
+
+
+def paired_cell(p: PairedStat) -> str:
+    """A table cell: the mean difference [interval across seeds] n=seeds; A lower / B lower of pairs."""
+    s = p.stat
+    interval = f" [{_signed(s.low)}, {_signed(s.high)}]" if s.n > 1 else ""
+    return f"{_signed(s.mean)}{interval} n={s.n}; {p.a_faster} / {p.b_faster} of {p.pairs}"
 
 
 def paired_markdown(jobs: Sequence[JobResult]) -> list[str]:
@@ -95,9 +104,7 @@ def paired_markdown(jobs: Sequence[JobResult]) -> list[str]:
                 if p is None:
                     cells.append("—")
                     continue
-                s = p.stat
-                interval = f" [{_signed(s.low)}, {_signed(s.high)}]" if s.n > 1 else ""
-                cells.append(f"{_signed(s.mean)}{interval} n={s.n}; {p.a_faster} / {p.b_faster} of {p.pairs}")
+                cells.append(paired_cell(p))
                 seeds = " / ".join(f"{seed}: {_signed(d)}" for seed, d in p.per_seed.items())
                 per_seed.append([f"{a} - {b}", str(evs), seeds])
             rows.append([str(evs), *cells])
