@@ -33,6 +33,8 @@ def plot_learning_curve(
     references: Mapping[str, float] | None = None,
     title: str = "",
     validation: ValidationRecord | None = None,
+    travel_label: str = "travel time to charge start",
+    switches_label: str = "switches per episode",
 ) -> Path:
     """Save a PNG of travel time per training episode (top), the periodic held-out validation if
     there is one (middle), and station switches (bottom).
@@ -47,6 +49,8 @@ def plot_learning_curve(
         title: figure title.
         validation: the run's validations (:mod:`evcd.loops.validation`): the policy's mean travel
             time on the same held-out episodes after each block of training, beside the rules'.
+        travel_label, switches_label: what a row's ``travel_time`` and ``switches`` are (the fleet's
+            rows hold its guided EVs' means).
     """
     validated = validation is not None and bool(validation.points)
     fig = Figure(figsize=(11, 9.5 if validated else 7))
@@ -70,10 +74,10 @@ def plot_learning_curve(
     for (label, value), ls in zip((references or {}).items(), ("--", ":", "-.", "--"), strict=False):
         ax_t.axhline(value, color="k", ls=ls, lw=1, label=label)
     ax_t.set_yscale("log")
-    ax_t.set_ylabel("travel time to charge start (s, log)")
+    ax_t.set_ylabel(f"{travel_label} (s, log)")
     ax_t.grid(alpha=0.3, which="both")
     ax_t.legend(fontsize=8, loc="upper right")
-    ax_s.set_ylabel(f"switches per episode\n(mean of the last {window})")
+    ax_s.set_ylabel(f"{switches_label}\n(mean of the last {window})")
     ax_s.set_xlabel("training episodes played")
     ax_s.grid(alpha=0.3)
     if title:

@@ -334,7 +334,9 @@ def _write_outputs(
         atomic_write_text(run_dir / FLEET_TRAIN_CSV, rows_csv_text(state.rows))
         title = f"{result.agent} on the fleet: guided EVs' mean travel time per training episode"
         plot_learning_curve({result.agent: _curve_rows(state.rows)}, run_dir / CURVE_PNG, window=10,
-                            title=title, validation=state.validation)  # fmt: skip
+                            title=title, validation=state.validation,
+                            travel_label="guided EVs' mean travel time",
+                            switches_label="switches per guided EV")  # fmt: skip
     atomic_write_text(run_dir / FLEET_CSV, rows_csv_text([e.row() for e in result.episodes]))
     for name, (_, eps) in result.baselines.items():
         atomic_write_text(run_dir / baseline_csv(name, fleet=True), rows_csv_text([e.row() for e in eps]))
