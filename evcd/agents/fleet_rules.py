@@ -10,6 +10,11 @@ to station ``i`` and still driving, and estimate the time to the start of chargi
   new choices, so several of them can still pick the same short queue together.
 - :class:`CentralAgent` assigns the EVs deciding at one tick jointly, one after the other, each
   seeing where the ones before it were sent.
+
+Both take ``switch_margin_s`` (default 0: off): an EV already sent somewhere (or waiting in a car park)
+keeps that station unless another one is estimated to start its charge more than that many seconds
+sooner. EVs that count each other can move away from a station together and back together
+(docs/FLEET.md, "A first look"); the margin damps that oscillation.
 """
 
 from __future__ import annotations
@@ -21,6 +26,28 @@ import numpy as np
 
 from evcd.agents.base import EpisodeState
 from evcd.agents.heuristics import QueueAwareAgent
+from evcd.utils.validation import check_real
+
+
+@dataclass
+class FleetRuleEpisode(EpisodeState):
+    """A guided EV as a fleet rule knows it: the station it sent it to at its last decision (``None``
+    before the first)."""
+
+    station: int | None = None
+
+
+#: The former name of :class:`FleetRuleEpisode` (the central rule's episode state).
+CentralEpisode = FleetRuleEpisode
+
+
+def counted_at(d: np.ndarray, episodes: Sequence[FleetRuleEpisode]) -> np.ndarray:
+    """Per EV (rows of ``d``, physical ``D``), the station it is at or heading to as far as the rule
+    knows (-1: unknown): where it waits (``D == 0``: in that station's ``Z``), else where the rule last
+    sent it."""
+    waiting = d == 0.0
+    last = np.array([-1 if e.station is None else e.station for e in episodes], dtype=np.int64)
+    return np.where(waiting.any(axis=1), np.argmax(waiting, axis=1), last)
 
 
 class ReservationAgent(QueueAwareAgent):
@@ -35,6 +62,45 @@ class ReservationAgent(QueueAwareAgent):
     name = "reservation"
     obs_blocks = (4,)
 
+    def __init__(
+        self,
+        n_stations: int,
+        rng: np.random.Generator,
+        points: int | Sequence[int] = 2,
+        normalized: bool = False,
+        speed_mps: float = 10.0,
+        vehicle_delay_s: float = 2.0,
+        charge_s: float = 1350.0,
+        switch_margin_s: float = 0.0,
+    ) -> None:
+        super().__init__(n_stations, rng, points, normalized, speed_mps, vehicle_delay_s, charge_s)
+        self.switch_margin_s = check_real("switch_margin_s", switch_margin_s, low=0.0)
+
+    def new_episode(self, rng: np.random.Generator) -> FleetRuleEpisode:
+        """A guided EV this agent has not decided yet."""
+        return FleetRuleEpisode(rng)
+
+    def keep(self, scores: np.ndarray, current: int) -> int:
+        """The station of smallest score (ties: the lowest index), unless ``current`` (>= 0) is within
+        ``switch_margin_s`` of it (a margin of 0 never keeps: the plain rule)."""
+        best = int(np.argmin(scores))
+        margin = self.switch_margin_s
+        return current if margin > 0 and current >= 0 and scores[current] - scores[best] <= margin else best
+
+    def decide(
+        self, obs: np.ndarray, episodes: Sequence[FleetRuleEpisode], explore: bool = False
+    ) -> np.ndarray:
+        """Per EV the station with the smallest :meth:`estimate`, damped by ``switch_margin_s``; each
+        EV's state records where it is sent."""
+        batch = np.atleast_2d(np.asarray(obs))
+        scores = self.estimate(batch)
+        current = counted_at(self.read(batch)[0], episodes)
+        stations = np.array([self.keep(row, int(c)) for row, c in zip(scores, current, strict=True)],
+                            dtype=np.int64)  # fmt: skip
+        for episode, s in zip(episodes, stations, strict=True):
+            episode.station = int(s)
+        return stations if np.ndim(obs) > 1 else stations[0]
+
     def estimate(self, obs: np.ndarray) -> np.ndarray:
         """Estimated seconds to the start of charging at each station (of each row of a batch), the
         backlog counting ``Z + H``.
@@ -45,14 +111,6 @@ class ReservationAgent(QueueAwareAgent):
         d, n, z, h = self.read(obs)
         assert h is not None  # obs_blocks = (4,)
         return self.score(d, n, z + h)
-
-
-@dataclass
-class CentralEpisode(EpisodeState):
-    """A guided EV as :class:`CentralAgent` knows it: the station it sent it to at its last decision
-    (``None`` before the first)."""
-
-    station: int | None = None
 
 
 class CentralAgent(ReservationAgent):
@@ -72,25 +130,22 @@ class CentralAgent(ReservationAgent):
       changes nothing: it is already in the others' ``Z`` or ``H``.
 
     Where an EV was counted comes from its episode state (the station this agent sent it to at its
-    previous decision, :class:`CentralEpisode`) and, for an EV waiting in a car park, from its
-    observation (``D == 0`` there, and it is in that station's ``Z``).
+    previous decision, :class:`FleetRuleEpisode`) and, for an EV waiting in a car park, from its
+    observation (``D == 0`` there, and it is in that station's ``Z``). With ``switch_margin_s`` an EV
+    keeps that station unless another is better by more than the margin (:meth:`keep`).
 
     Approximation: at an EV's *first* decision the agent does not know where it was heading (its
     trip's own station, in the others' ``H``), so that station keeps counting it for the EVs assigned
     after it at that tick, one vehicle too many there. The same holds if another dispatcher moved the
     EV since this agent last decided it. Everything else is exact with respect to the observation.
 
-    Deterministic; the constructor arguments are :class:`~evcd.agents.heuristics.QueueAwareAgent`'s.
+    Deterministic; the constructor arguments are :class:`ReservationAgent`'s.
     """
 
     name = "central"
 
-    def new_episode(self, rng: np.random.Generator) -> CentralEpisode:
-        """A guided EV this agent has not decided yet."""
-        return CentralEpisode(rng)
-
     def decide(
-        self, obs: np.ndarray, episodes: Sequence[CentralEpisode], explore: bool = False
+        self, obs: np.ndarray, episodes: Sequence[FleetRuleEpisode], explore: bool = False
     ) -> np.ndarray:
         """The stations of the ``k`` EVs deciding at this tick, assigned jointly (see the class).
 
@@ -115,12 +170,12 @@ class CentralAgent(ReservationAgent):
             )
         k, m = d.shape
         ahead = z + h  # (k, m): what each EV counts at each station before this tick's assignments
-        counted = self._counted_at(d, episodes)
+        counted = counted_at(d, episodes)
         order = np.argsort(self.score(d, n, ahead).min(axis=1), kind="stable")
         moved = np.zeros(m)  # vehicles added (+1) and removed (-1) per station by the assignments so far
         stations = np.empty(k, dtype=np.int64)
         for j in order:
-            s = int(np.argmin(self.score(d[j], n[j], ahead[j] + moved)))
+            s = self.keep(self.score(d[j], n[j], ahead[j] + moved), int(counted[j]))
             stations[j] = s
             if counted[j] != s:
                 moved[s] += 1.0
@@ -129,11 +184,3 @@ class CentralAgent(ReservationAgent):
         for episode, s in zip(episodes, stations, strict=True):
             episode.station = int(s)
         return stations
-
-    @staticmethod
-    def _counted_at(d: np.ndarray, episodes: Sequence[CentralEpisode]) -> np.ndarray:
-        """Per EV, the station at which the others count it now (-1: unknown): where it waits
-        (``D == 0``: in that station's ``Z``), else where this agent last sent it (in ``H``)."""
-        waiting = d == 0.0
-        last = np.array([-1 if e.station is None else e.station for e in episodes], dtype=np.int64)
-        return np.where(waiting.any(axis=1), np.argmax(waiting, axis=1), last)
