@@ -56,6 +56,7 @@ def test_the_fleet_experiment_composes_and_builds_every_fleet_dispatcher(script_
     cfg = compose_config("train", "experiment=fleet")
     assert (cfg.task, cfg.regime, cfg.fleet.guided_share, cfg.env.reward) == ("fleet", "fleet", 1.0, "time")
     assert list(cfg.env.departure_window) == [25200.0, 36000.0] and cfg.agent.name == "dueling_ddqn"
+    assert cfg.evs == 600 and list(cfg.train.validation.rules) == ["queue_aware", "central"]
     assert set(cfg.eval.baselines) == {"greedy", "queue_aware", "reservation", "central"}
     assert compose_config("train").task == "single"
     cfg = compose_config("train", *script_overrides, *FLEET)
@@ -88,7 +89,7 @@ def test_train_a_fleet_then_evaluate_its_policy(small, script_overrides, tmp_pat
     assert data["task"] == "fleet" and data["config"]["regime"] == "fleet"
     assert data["training"]["episodes_done"] == 2 and data["training"]["transitions"] > 0
     assert [p["episodes_done"] for p in data["validation"]["points"]] == [2]
-    assert set(data["validation"]["rules"]) == {"queue_aware", "reservation"}
+    assert set(data["validation"]["rules"]) == {"queue_aware", "central"}
     assert set(data["baselines"]) == {"greedy", "reservation"}
     assert "vs reservation, guided_travel on the same 1 episodes" in log
     assert load_checkpoint(run / "checkpoints")["format"] == "evcd.fleet_train/1"
