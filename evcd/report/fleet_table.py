@@ -49,6 +49,8 @@ FLEET_PAIRS: tuple[tuple[str, str], ...] = (
     ("dueling_ddqn", "queue_aware"),
     ("dqn", "reservation"),
     ("dueling_ddqn", "reservation"),
+    ("dqn", "central"),
+    ("dueling_ddqn", "central"),
     ("dueling_ddqn", "dqn"),
 )
 #: The travel times of the table: the guided EVs' and everybody's charging in the window.

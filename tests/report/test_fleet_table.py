@@ -22,13 +22,13 @@ from tests.report.test_make_table import results_json as single_results_json
 
 T_0975_2 = 4.302652729749464  # Student t, 97.5% quantile, 2 degrees of freedom
 
-AGENTS = ("queue_aware", "reservation", "dqn", "dueling_ddqn")
+AGENTS = ("queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
 SEEDS = (0, 1, 2)
 SHARES = (0.5, 1.0)
 BASE = {
     ("queue_aware", 0.5): 300.0, ("reservation", 0.5): 320.0, ("dqn", 0.5): 310.0,
     ("dueling_ddqn", 0.5): 290.0, ("queue_aware", 1.0): 700.0, ("reservation", 1.0): 650.0,
-    ("dqn", 1.0): 640.0, ("dueling_ddqn", 1.0): 600.0,
+    ("dqn", 1.0): 640.0, ("dueling_ddqn", 1.0): 600.0, ("central", 0.5): 280.0, ("central", 1.0): 620.0,
 }  # fmt: skip
 SPREAD = (-5.0, 0.0, 5.0)
 #: per-seed noise of the learners, so that their paired differences have a real interval
@@ -114,6 +114,9 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     out = make_fleet_table([sweep], tmp_path / "out")
     md = out.markdown
     assert len(out.collection.jobs) == len(AGENTS) * len(SEEDS) * len(SHARES) and not out.collection.gaps
+    assert row(md, "### Paired differences on the guided EVs", ["400", "1"])[
+        "dueling_ddqn - central"
+    ].startswith("-20.0 [")
     # the cell: mean over seeds of the jobs' means, t interval across seeds
     half = T_0975_2 * 5.0 / math.sqrt(3)  # SPREAD's sd is 5
     cell = row(md, "### Mean travel time of the guided EVs", ["400", "0.5"])
@@ -139,7 +142,7 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     assert row(md, "### Per dispatcher", ["400", "0.5", "dqn"])["training"] == "180 / 27000 / 75.0"
     # the csv: one row per job; the figure is a real PNG
     rows = list(csv.DictReader(io.StringIO((tmp_path / "out" / CSV_NAME).read_text())))
-    assert len(rows) == 24 and {r["eval_days"] for r in rows} == {"101 102"}
+    assert len(rows) == len(AGENTS) * 6 and {r["eval_days"] for r in rows} == {"101 102"}
     assert (tmp_path / "out" / MD_NAME).read_text() == md
     assert matplotlib.image.imread(tmp_path / "out" / BARS_PNG).shape[0] > 300
     with pytest.raises(FileExistsError, match="refusing to overwrite"):
