@@ -151,7 +151,7 @@ def plot_training_curves(
     per_row = {r: sorted(e for rr, e in panels if rr == r) for r in regimes}
     ncols = max(len(v) for v in per_row.values())
     colors = colors or agent_colors(list(dict.fromkeys(a for p in panels.values() for a in p)))
-    fig = Figure(figsize=(5.4 * ncols, 4.2 * len(regimes) + 0.6))
+    fig = Figure(figsize=(max(8.0, 5.4 * ncols), 4.2 * len(regimes) + 0.6))  # room for the title
     axes = fig.subplots(len(regimes), ncols, squeeze=False)
     for row, regime in enumerate(regimes):
         for col in range(ncols):
