@@ -158,8 +158,17 @@ class Agent(ABC):
     @classmethod
     def option_names(cls) -> list[str]:
         """The options the constructor takes beyond ``n_stations`` and ``rng`` (for the registry's
-        check of unknown options)."""
-        return list(inspect.signature(cls.__init__).parameters)[3:]
+        check of unknown options): its named parameters, and where it passes ``**kwargs`` on to its
+        parent's constructor, the parent's too."""
+        names: list[str] = []
+        for klass in cls.__mro__:
+            if "__init__" not in vars(klass):
+                continue
+            params = list(inspect.signature(vars(klass)["__init__"]).parameters.values())[3:]
+            names += [p.name for p in params if p.kind is not p.VAR_KEYWORD and p.name not in names]
+            if not any(p.kind is p.VAR_KEYWORD for p in params):
+                break
+        return names
 
     @classmethod
     def from_env(cls, env: Any, rng: np.random.Generator, **kwargs: Any) -> Self:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -56,24 +57,17 @@ class ReservationAgent(QueueAwareAgent):
     For station ``i``: ``max(t, b)`` as in :class:`~evcd.agents.heuristics.QueueAwareAgent`, where the
     backlog ``b`` counts ``Z + H`` vehicles (those at the station plus the other guided EVs heading
     there) instead of ``Z``. Ties go to the lowest index. It needs the fleet's 4-block observation;
-    the constructor arguments are :class:`~evcd.agents.heuristics.QueueAwareAgent`'s.
+    the constructor takes ``switch_margin_s`` (module docstring) and the arguments of
+    :class:`~evcd.agents.heuristics.QueueAwareAgent`.
     """
 
     name = "reservation"
     obs_blocks = (4,)
 
     def __init__(
-        self,
-        n_stations: int,
-        rng: np.random.Generator,
-        points: int | Sequence[int] = 2,
-        normalized: bool = False,
-        speed_mps: float = 10.0,
-        vehicle_delay_s: float = 2.0,
-        charge_s: float = 1350.0,
-        switch_margin_s: float = 0.0,
+        self, n_stations: int, rng: np.random.Generator, switch_margin_s: float = 0.0, **kwargs: Any
     ) -> None:
-        super().__init__(n_stations, rng, points, normalized, speed_mps, vehicle_delay_s, charge_s)
+        super().__init__(n_stations, rng, **kwargs)  # QueueAwareAgent's options
         self.switch_margin_s = check_real("switch_margin_s", switch_margin_s, low=0.0)
 
     def new_episode(self, rng: np.random.Generator) -> FleetRuleEpisode:
