@@ -350,15 +350,8 @@ class DQNAgent(Agent):
         """Everything that determines the agent's future: networks, optimizer, replay, counters, its
         generators, the input scale and the hyperparameters (checked on load). A snapshot: later
         training does not change it (torch's own ``state_dict`` returns the live tensors)."""
-        config = {**asdict(self.config), "double": self.double, "dueling": self.dueling}
-        config["hidden"] = list(config["hidden"])
         return {
-            "format": STATE_FORMAT,
-            "n_stations": self.n_stations,
-            "config": config,
-            "input_scale": torch.from_numpy(self.input_scale.copy()),
-            "online": copy.deepcopy(self.online.state_dict()),
-            "target": copy.deepcopy(self.target.state_dict()),
+            **self.policy_state_dict(),
             "optimizer": copy.deepcopy(self.optimizer.state_dict()),
             "replay": self.replay.state_dict(),
             "counters": {
@@ -370,6 +363,20 @@ class DQNAgent(Agent):
             },
             "rng": self.rng.bit_generator.state,
             "learn_rng": self.learn_rng.bit_generator.state,
+        }
+
+    def policy_state_dict(self) -> dict[str, Any]:
+        """The part of :meth:`state_dict` that ``load_state_dict(..., policy_only=True)`` reads: the
+        networks, their input scale and the settings it checks (no optimizer, no replay)."""
+        config = {**asdict(self.config), "double": self.double, "dueling": self.dueling}
+        config["hidden"] = list(config["hidden"])
+        return {
+            "format": STATE_FORMAT,
+            "n_stations": self.n_stations,
+            "config": config,
+            "input_scale": torch.from_numpy(self.input_scale.copy()),
+            "online": copy.deepcopy(self.online.state_dict()),
+            "target": copy.deepcopy(self.target.state_dict()),
         }
 
     def load_state_dict(self, state: dict[str, Any], policy_only: bool = False) -> None:

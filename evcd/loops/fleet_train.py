@@ -20,7 +20,8 @@ closed before the next phase plays.
    on fixed fleet episodes of the tuning days, the rules once on the same episodes; each point is the
    mean over episodes of the guided EVs' mean travel time. It neither explores nor learns, so it does
    not change the weights (tested).
-3. **Evaluation**: the agent without exploration on the evaluation stream's fleet episodes (the ones
+3. **Evaluation**: the agent (with ``validation.select_best``, the policy of its best validation:
+   :mod:`evcd.loops.best_policy`) without exploration on the evaluation stream's fleet episodes (the ones
    ``scripts/evaluate.py task=fleet`` plays for the seed), each baseline on the very same episodes (same
    day, same guided EVs), and per baseline the paired difference of the guided EVs' and of all EVs'
    mean travel time per episode, with a bootstrap interval over episodes.
@@ -28,7 +29,8 @@ closed before the next phase plays.
 Files in ``run_dir``: ``train_fleet_episodes.csv``, ``fleet_episodes.csv``,
 ``baseline_<rule>_fleet_episodes.csv``, ``results.json``, ``learning_curve.png`` (guided EVs' mean travel
 time per training episode and the validation curve), ``fleet_trace.png`` (the first evaluation
-episode, per dispatcher), ``checkpoints/``, ``tensorboard/``. Nothing already there is overwritten.
+episode, per dispatcher), ``checkpoints/``, ``tensorboard/`` (and ``best/`` with
+``validation.select_best``). Nothing already there is overwritten.
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ from tqdm import tqdm
 
 from evcd.agents.base import Agent
 from evcd.env.fleet import FleetEnv
+from evcd.loops.best_policy import keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.fleet import FleetEpisode, evaluate_fleet, play_fleet
 from evcd.loops.fleet_figure import plot_fleet_traces
@@ -233,6 +236,7 @@ def _train(
                 validator.validate(agent, done, state.transitions, state.validation)
                 state.validation_s += wallclock.perf_counter() - t1
                 tlog.validation(state.validation, state.transitions)
+                keep_if_best(run_dir, agent, settings.validation, state.validation)
             tlog.flush()
             save_training(run_dir, agent, state, config)
     except KeyboardInterrupt:
@@ -272,7 +276,8 @@ def train_and_evaluate_fleet(
                 validator = FleetValidator(envs["validation"], settings.validation, settings.seed,
                                            validation_rules or {})  # fmt: skip
             _train(agent, envs, settings, run_dir, state, config, tlog, validator)
-        training = _training_summary(agent, state, episodes)
+        selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
+        training = {**_training_summary(agent, state, episodes), "evaluated_after_episodes": selected}
         result = _evaluate(agent, envs["eval"], settings, baselines or {}, training)
         rules = {n: s["guided_travel"] for n, (s, _) in result.baselines.items()}
         paired = {n: p["guided_travel"] for n, p in result.paired.items()}

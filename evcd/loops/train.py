@@ -17,15 +17,16 @@ evaluation measures the policy on traffic it never trained on.
    continues from it; since an episode depends only on its seed
    and the agent's state, an interrupted and resumed run ends with the same weights as an
    uninterrupted one.
-2. **Evaluation**: the agent, without exploration, on the evaluation episodes (stream
+2. **Evaluation**: the agent (with ``validation.select_best``, the policy of its best validation:
+   :mod:`evcd.loops.best_policy`), without exploration, on the evaluation episodes (stream
    :data:`~evcd.loops.seeds.EVAL_STREAM`, the same episodes ``scripts/evaluate.py`` runs for that
    seed), then each baseline rule (greedy, queue_aware) on the same episodes, and the paired
    difference with each, with a bootstrap interval.
 
 Files in ``run_dir``: ``train_episodes.csv``, ``episodes.csv`` (the agent's evaluation),
 ``baseline_<rule>_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/``,
-``tensorboard/``. Nothing already there is overwritten: a run directory that holds a checkpoint
-is only entered again with ``resume=True``.
+``tensorboard/`` (and ``best/`` with ``validation.select_best``). Nothing already there is
+overwritten: a run directory that holds a checkpoint is only entered again with ``resume=True``.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ import numpy as np
 
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRow, EpisodeRunner, EpisodeSpec
+from evcd.loops.best_policy import keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
 from evcd.loops.progress import EpisodeProgress
@@ -173,6 +175,7 @@ def _train(
                 validator.validate(agent, state.episodes_done, state.transitions, state.validation)
                 state.validation_s += time.perf_counter() - t1
                 tlog.validation(state.validation, state.transitions)
+                keep_if_best(run_dir, agent, settings.validation, state.validation)
             tlog.flush()
             save_training(run_dir, agent, state, config)
             saved = state.episodes_done
@@ -227,10 +230,11 @@ def train_and_evaluate(
                 validator = Validator(runners, settings.validation, settings.seed, validation_rules or {})
             _train(agent, runners, dataclasses.replace(settings, episodes=episodes), run_dir, state, config,
                    tlog, validator)  # fmt: skip
+        selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
         evaluation, bases = _evaluate(agent, runners, settings, baselines or {})
         paired = {name: paired_difference(evaluation.rows, base.rows, bootstrap_rng(settings.seed),
                                           settings.resamples) for name, base in bases.items()}  # fmt: skip
-        training = _training_summary(agent, state, episodes)
+        training = {**_training_summary(agent, state, episodes), "evaluated_after_episodes": selected}
         tlog.evaluation(evaluation, bases, paired, state.transitions)
     finally:
         tlog.close()

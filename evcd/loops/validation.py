@@ -8,7 +8,9 @@ validation days), and the rules (greedy, queue_aware) play the very same episode
 each point of the curve is comparable with the others and with the rules.
 
 The validation neither explores nor learns and draws from generators of its own, so a run with it
-trains to exactly the weights of a run without it (tested).
+trains to exactly the weights of a run without it (tested). With ``select_best`` the run evaluates
+the policy of its best validation instead of its last (:mod:`evcd.loops.best_policy`): model
+selection on the tuning days, which never touches the evaluation days.
 """
 
 from __future__ import annotations
@@ -38,14 +40,22 @@ class ValidationSettings:
             ``checkpoint_every``, so that validating does not change how training episodes are
             grouped into engine calls.
         episodes: validation episodes.
+        select_best: evaluate the policy of the best validation (fewest truncated validation
+            episodes, then the lowest mean travel time; the earliest on a tie) instead of the last.
     """
 
     every: int = 0
     episodes: int = 30
+    select_best: bool = False
 
     def __post_init__(self) -> None:
         check_int("train.validation.every", self.every, minimum=0)
         check_int("train.validation.episodes", self.episodes, minimum=1)
+        if not isinstance(self.select_best, bool):
+            raise ValueError(f"train.validation.select_best={self.select_best!r}: must be true or false")
+        if self.select_best and not self.every:
+            raise ValueError("train.validation.select_best=true needs a validation to select by: set "
+                             "train.validation.every > 0")  # fmt: skip
 
 
 @dataclass
@@ -62,6 +72,16 @@ class ValidationPoint:
         charged = [t for t in self.travel_times if math.isfinite(t)]
         return float(np.mean(charged)) if charged else math.nan
 
+    @property
+    def truncated(self) -> int:
+        """Validation episodes that ended without a charge."""
+        return sum(not math.isfinite(t) for t in self.travel_times)
+
+    def rank(self) -> tuple[int, float]:
+        """Sort key of the best validation: fewest truncated episodes, then the lowest mean."""
+        mean = self.mean
+        return self.truncated, mean if math.isfinite(mean) else math.inf
+
 
 @dataclass
 class ValidationRecord:
@@ -70,6 +90,10 @@ class ValidationRecord:
 
     points: list[ValidationPoint] = field(default_factory=list)
     rules: dict[str, list[float]] = field(default_factory=dict)
+
+    def best(self) -> ValidationPoint | None:
+        """The best point (:meth:`ValidationPoint.rank`; the earliest on a tie), ``None`` before any."""
+        return min(self.points, key=ValidationPoint.rank) if self.points else None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values (NaN as ``None``: strict JSON)."""
@@ -83,6 +107,7 @@ class ValidationRecord:
                         "travel_times": plain(p.travel_times)} for p in self.points],
             "rules": {name: plain(times) for name, times in self.rules.items()},
             "rule_means": {name: _mean(times) for name, times in self.rules.items()},
+            "best_episodes_done": best.episodes_done if (best := self.best()) is not None else None,
         }  # fmt: skip
 
     @classmethod

@@ -73,7 +73,9 @@ def test_the_fleet_experiment_composes_and_builds_every_fleet_dispatcher(script_
 
 def test_train_a_fleet_then_evaluate_its_policy(small, script_overrides, tmp_path):
     run = tmp_path / "run"
-    proc = run_script("train.py", *small, "agent=dqn", f"hydra.run.dir={run}")
+    proc = run_script(
+        "train.py", *small, "agent=dqn", "train.validation.select_best=true", f"hydra.run.dir={run}"
+    )
     log = proc.stdout + proc.stderr
     assert proc.returncode == 0, log[-3000:]
     for name in (
@@ -89,6 +91,8 @@ def test_train_a_fleet_then_evaluate_its_policy(small, script_overrides, tmp_pat
     assert data["task"] == "fleet" and data["config"]["regime"] == "fleet"
     assert data["training"]["episodes_done"] == 2 and data["training"]["transitions"] > 0
     assert [p["episodes_done"] for p in data["validation"]["points"]] == [2]
+    # select_best reaches the trainer: its one validation's policy is kept and evaluated
+    assert data["training"]["evaluated_after_episodes"] == 2 and (run / "best" / "latest.json").is_file()
     assert set(data["validation"]["rules"]) == {"queue_aware", "central"}
     assert set(data["baselines"]) == {"greedy", "reservation"}
     assert "vs reservation, guided_travel on the same 1 episodes" in log

@@ -352,6 +352,8 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("train.validation.every=3", "validation.every=3: must be a multiple of train.checkpoint_every"),
         ("train.validation.every=2 train.validation.days=[0]", "train.validation.days share [0]"),
         ("eval.days=[-1]", "eval.days=[-1]"),
+        ("train.validation.every=0 train.validation.select_best=true", "select_best=true needs a validation"),
+        ("train.validation.every=2 train.validation.select_best=maybe", "select_best='maybe'"),
     ],
 )
 def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
