@@ -106,8 +106,9 @@ def _settings(cfg: DictConfig, seed: int, min_episodes: int) -> dict[str, Any]:
         "checkpoint_every": check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
         "progress": bool(cfg.progress),
         "resamples": check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
-        "validation": ValidationSettings(cfg.train.validation.every, cfg.train.validation.episodes,
-                                         cfg.train.validation.select_best),  # fmt: skip
+        "validation": ValidationSettings(
+            cfg.train.validation.every, cfg.train.validation.episodes, cfg.train.validation.select_best
+        ),
     }
 
 
