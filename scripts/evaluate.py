@@ -28,7 +28,7 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import make_agent_for_env
-from evcd.agents.dqn import checkpoint_agent_config
+from evcd.agents.dqn_state import checkpoint_agent_config
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.params import agent_params, env_kwargs, fleet_kwargs
 from evcd.cli.schema import register_configs

@@ -48,6 +48,7 @@ from evcd.agents.base import (
     observation_units,
 )
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
+from evcd.agents.dqn_state import STATE_FORMAT, check_policy_state
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
 from evcd.env.observation import unit_divisors
@@ -55,8 +56,6 @@ from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
 from evcd.utils.validation import check_bool
 
 log = logging.getLogger(__name__)
-
-STATE_FORMAT = "evcd.agents.dqn/2"
 
 
 @dataclass
@@ -389,24 +388,10 @@ class DQNAgent(Agent):
             CheckpointError: the state is not a DQN agent's, or was made for another observation
                 size, number of stations, network or switch setting (the message names it).
         """
-        found = state.get("format") if isinstance(state, dict) else type(state).__name__
-        if found != STATE_FORMAT:
-            earlier = isinstance(found, str) and found.startswith("evcd.agents.dqn/")
-            why = " (an earlier evcd's: retrain with this version)" if earlier else ""
-            raise CheckpointError(f"not a DQN agent state of this evcd (format {found!r}, expected "
-                                  f"{STATE_FORMAT!r}){why}")  # fmt: skip
-        saved = state["config"]
-        scale = np.asarray(to_numpy(state["input_scale"]), np.float32)
-        if scale.shape != self.input_scale.shape:
-            raise CheckpointError(
-                f"the checkpoint was made for observations of size {scale.shape[0]}; this "
-                f"environment's are {self.obs_dim} ({self.blocks} x {self.n_stations} stations)"
-            )
         mine = {"hidden": list(self.config.hidden), "dueling": self.dueling, "double": self.double}
-        for key, value in mine.items():
-            if list(np.atleast_1d(saved[key])) != list(np.atleast_1d(value)):
-                raise CheckpointError(f"the checkpoint's agent has {key}={saved[key]!r}; this one has "
-                                      f"{key}={value!r} (use the same agent settings)")  # fmt: skip
+        scale = check_policy_state(
+            state, self.input_scale, mine, f"{self.blocks} x {self.n_stations} stations"
+        )
         if not np.array_equal(scale, self.input_scale):
             log.info("the checkpoint's network reads observations at its own scale (trained with other "
                      "charging points or without scaling); using it")  # fmt: skip
@@ -436,22 +421,3 @@ class DQNAgent(Agent):
         state = load_checkpoint(path)
         self.load_state_dict(state.get("agent", state), policy_only=True)
         log.info("loaded %s policy from %s", self.name, path)
-
-
-def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
-    """The network settings (``hidden``, ``double``, ``dueling``) of the agent saved in a checkpoint,
-    so that a policy can be rebuilt to load it.
-
-    Raises:
-        CheckpointError: the file is not a DQN checkpoint (or is damaged).
-    """
-    state = load_checkpoint(path)
-    agent = state.get("agent", state)
-    if not isinstance(agent, dict) or agent.get("format") != STATE_FORMAT:
-        raise CheckpointError(f"checkpoint {str(path)!r} does not hold a DQN agent")
-    saved = agent["config"]
-    return {
-        "hidden": tuple(saved["hidden"]),
-        "double": bool(saved["double"]),
-        "dueling": bool(saved["dueling"]),
-    }

@@ -17,8 +17,9 @@ import torch
 
 from evcd.agents import make_agent, make_agent_for_env
 from evcd.agents.base import Transition
-from evcd.agents.dqn import STATE_FORMAT, DQNAgent, DQNEpisode, checkpoint_agent_config
+from evcd.agents.dqn import DQNAgent, DQNEpisode
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
+from evcd.agents.dqn_state import STATE_FORMAT, checkpoint_agent_config
 from evcd.agents.networks import DuelingQNetwork, QNetwork
 from evcd.env.observation import unit_divisors
 from evcd.env.runners import SingleEnvRunner
@@ -1035,7 +1036,11 @@ def test_a_loaded_policy_sees_what_it_was_trained_on():
         other = _agent(seed=3, **kwargs)
         other.load_state_dict(trained.state_dict(), policy_only=True)
         np.testing.assert_array_equal(other.input_scale, trained.input_scale)
-        np.testing.assert_allclose(other.q_values(obs), expected, rtol=1e-5)
+        # float32: the input is rounded once more on the way (obs / divisors * scale), so a Q-value
+        # near 0 may move by the rounding of the largest ones; compare at that scale
+        np.testing.assert_allclose(
+            other.q_values(obs), expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max()
+        )
 
 
 @pytest.mark.parametrize("name", ["dqn", "dueling_ddqn"])

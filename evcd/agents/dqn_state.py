@@ -1,0 +1,73 @@
+"""The saved form of a DQN agent: its format tag, the checks a checkpoint passes before its networks
+are loaded, and the network settings read back from a checkpoint (to rebuild the agent that fits it).
+
+:class:`~evcd.agents.dqn.DQNAgent` writes and reads the state (``state_dict`` / ``load_state_dict``);
+this module holds what is about the file rather than the agent, so that scripts can ask a checkpoint
+what it holds without building anything.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
+
+STATE_FORMAT = "evcd.agents.dqn/2"
+
+
+def check_policy_state(
+    state: Any, input_scale: np.ndarray, settings: dict[str, Any], layout: str
+) -> np.ndarray:
+    """Check that ``state`` is a DQN agent state of this evcd that fits an agent, and return its
+    input scale.
+
+    Args:
+        state: what ``DQNAgent.state_dict`` wrote.
+        input_scale: the agent's own input scale (its shape is the observation size).
+        settings: the agent's ``hidden``, ``dueling`` and ``double`` (they must match the saved ones).
+        layout: how the agent's observation is made up, for the message (e.g. ``"3 x 5 stations"``).
+
+    Raises:
+        CheckpointError: another format, another observation size, or other network settings (the
+            message names which).
+    """
+    found = state.get("format") if isinstance(state, dict) else type(state).__name__
+    if found != STATE_FORMAT:
+        earlier = isinstance(found, str) and found.startswith("evcd.agents.dqn/")
+        why = " (an earlier evcd's: retrain with this version)" if earlier else ""
+        raise CheckpointError(f"not a DQN agent state of this evcd (format {found!r}, expected "
+                              f"{STATE_FORMAT!r}){why}")  # fmt: skip
+    scale = np.asarray(to_numpy(state["input_scale"]), np.float32)
+    if scale.shape != input_scale.shape:
+        raise CheckpointError(
+            f"the checkpoint was made for observations of size {scale.shape[0]}; this "
+            f"environment's are {input_scale.shape[0]} ({layout})"
+        )
+    saved = state["config"]
+    for key, value in settings.items():
+        if list(np.atleast_1d(saved[key])) != list(np.atleast_1d(value)):
+            raise CheckpointError(f"the checkpoint's agent has {key}={saved[key]!r}; this one has "
+                                  f"{key}={value!r} (use the same agent settings)")  # fmt: skip
+    return scale
+
+
+def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
+    """The network settings (``hidden``, ``double``, ``dueling``) of the agent saved in a checkpoint,
+    so that a policy can be rebuilt to load it.
+
+    Raises:
+        CheckpointError: the file is not a DQN checkpoint (or is damaged).
+    """
+    state = load_checkpoint(path)
+    agent = state.get("agent", state)
+    if not isinstance(agent, dict) or agent.get("format") != STATE_FORMAT:
+        raise CheckpointError(f"checkpoint {str(path)!r} does not hold a DQN agent")
+    saved = agent["config"]
+    return {
+        "hidden": tuple(saved["hidden"]),
+        "double": bool(saved["double"]),
+        "dueling": bool(saved["dueling"]),
+    }
