@@ -132,7 +132,7 @@ class DQNAgent(Agent):
         init_seed = int(rng.integers(2**63 - 1))
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(init_seed)
-            self.online = make_q_network(self.obs_dim, self.n_stations, cfg.hidden, self.dueling)
+            self.online = make_q_network(self.obs_dim, self.n_stations, cfg.hidden, self.dueling, cfg.network)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self.optimizer = torch.optim.Adam(self.online.parameters(), lr=cfg.lr)
         self.replay = PrioritizedReplayBuffer(cfg.buffer_size, self.obs_dim, cfg.alpha, cfg.priority_eps)
@@ -388,7 +388,13 @@ class DQNAgent(Agent):
             CheckpointError: the state is not a DQN agent's, or was made for another observation
                 size, number of stations, network or switch setting (the message names it).
         """
-        mine = {"hidden": list(self.config.hidden), "dueling": self.dueling, "double": self.double}
+        c = self.config
+        mine = {
+            "hidden": list(c.hidden),
+            "network": c.network,
+            "dueling": self.dueling,
+            "double": self.double,
+        }
         scale = check_policy_state(
             state, self.input_scale, mine, f"{self.blocks} x {self.n_stations} stations"
         )

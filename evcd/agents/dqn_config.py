@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-from evcd.agents.networks import check_hidden
+from evcd.agents.networks import NETWORKS, check_hidden
 from evcd.utils.validation import check_choice, check_int, check_real
 
 LOSSES = ("mse", "huber")
@@ -23,6 +23,9 @@ class DQNConfig:
 
     Attributes:
         hidden: hidden layer sizes of the MLP trunk.
+        network: ``"mlp"`` (the paper's: one MLP reads the whole observation) or ``"station"`` (one
+            trunk shared by the stations scores each from its own features and its index,
+            :class:`~evcd.agents.networks.StationQNetwork`).
         lr: Adam learning rate.
         batch_size: transitions per gradient step.
         buffer_size: replay capacity (transitions).
@@ -50,6 +53,7 @@ class DQNConfig:
     """
 
     hidden: tuple[int, ...] = (512, 256)
+    network: str = "mlp"
     lr: float = 1e-3
     batch_size: int = 32
     buffer_size: int = 10_000
@@ -86,6 +90,7 @@ class DQNConfig:
         for key in ("gamma", "epsilon_start", "epsilon_end", "alpha", "beta_start"):
             check_real(key, getattr(self, key), low=0.0, high=1.0)
         check_real("tau", self.tau, low=0.0, high=1.0, low_open=True)
+        check_choice("network", self.network, NETWORKS)
         check_choice("exploration", self.exploration, EXPLORATIONS)
         check_choice("loss", self.loss, LOSSES)
         if self.max_grad_norm is not None:

@@ -27,7 +27,8 @@ def check_policy_state(
     Args:
         state: what ``DQNAgent.state_dict`` wrote.
         input_scale: the agent's own input scale (its shape is the observation size).
-        settings: the agent's ``hidden``, ``dueling`` and ``double`` (they must match the saved ones).
+        settings: the agent's ``hidden``, ``network``, ``dueling`` and ``double`` (they must match the
+            saved ones).
         layout: how the agent's observation is made up, for the message (e.g. ``"3 x 5 stations"``).
 
     Raises:
@@ -46,7 +47,7 @@ def check_policy_state(
             f"the checkpoint was made for observations of size {scale.shape[0]}; this "
             f"environment's are {input_scale.shape[0]} ({layout})"
         )
-    saved = state["config"]
+    saved = _network_settings(state["config"])
     for key, value in settings.items():
         if list(np.atleast_1d(saved[key])) != list(np.atleast_1d(value)):
             raise CheckpointError(f"the checkpoint's agent has {key}={saved[key]!r}; this one has "
@@ -55,8 +56,8 @@ def check_policy_state(
 
 
 def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
-    """The network settings (``hidden``, ``double``, ``dueling``) of the agent saved in a checkpoint,
-    so that a policy can be rebuilt to load it.
+    """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of the agent saved in a
+    checkpoint, so that a policy can be rebuilt to load it.
 
     Raises:
         CheckpointError: the file is not a DQN checkpoint (or is damaged).
@@ -65,9 +66,15 @@ def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
     agent = state.get("agent", state)
     if not isinstance(agent, dict) or agent.get("format") != STATE_FORMAT:
         raise CheckpointError(f"checkpoint {str(path)!r} does not hold a DQN agent")
-    saved = agent["config"]
+    saved = _network_settings(agent["config"])
     return {
         "hidden": tuple(saved["hidden"]),
+        "network": str(saved["network"]),
         "double": bool(saved["double"]),
         "dueling": bool(saved["dueling"]),
     }
+
+
+def _network_settings(saved: dict[str, Any]) -> dict[str, Any]:
+    """A saved agent config, with the network a checkpoint made before ``network`` existed holds (the MLP)."""
+    return {"network": "mlp", **saved}

@@ -825,6 +825,7 @@ def test_learning_changes_only_the_online_network_between_target_updates():
         ({"tau": 1.5}, "tau=1.5"),
         ({"loss": "l1"}, "loss='l1'"),
         ({"exploration": "bogus"}, "exploration='bogus'"),
+        ({"network": "lstm"}, "network='lstm'"),
         ({"target_update": 0}, "target_update=0"),
         ({"n_step": 0}, "n_step=0"),
         ({"train_freq": 0}, "train_freq=0"),
@@ -980,6 +981,7 @@ def test_the_state_neither_holds_nor_sets_torchs_global_generator():
         ({"n_stations": 2}, "size 9"),
         ({"hidden": (16, 8)}, "hidden"),
         ({"hidden": (16,)}, "hidden"),
+        ({"network": "station"}, "network"),
         ({"dueling": True}, "dueling"),
         ({"double": True}, "double"),
     ],
@@ -1059,12 +1061,34 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
     built = make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **RESUME)
     assert _equal(_params(built.online), _params(trained.online))
     config = checkpoint_agent_config(run_dir)
-    assert config == {"hidden": (16, 16), "double": name == "dueling_ddqn", "dueling": name == "dueling_ddqn"}
+    dueling = name == "dueling_ddqn"
+    assert config == {"hidden": (16, 16), "network": "mlp", "double": dueling, "dueling": dueling}
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")
     assert checkpoint_agent_config(tmp_path / "bare") == config
     with pytest.raises(CheckpointError, match="hidden"):
         make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **{**RESUME, "hidden": (8,)})
+
+
+@pytest.mark.parametrize("name", ["dqn", "dueling_ddqn"])
+def test_a_station_network_checkpoint_rebuilds_its_network(tmp_path, name):
+    trained = make_agent(name, M, np.random.default_rng(3), **{**RESUME, "network": "station"})
+    save_checkpoint(tmp_path, trained.state_dict(), "agent")
+    config = checkpoint_agent_config(tmp_path)
+    assert config["network"] == "station"
+    rebuilt = make_agent(name, M, np.random.default_rng(4), checkpoint=tmp_path, **{**RESUME, **config})
+    obs = _obs(np.random.default_rng(8), 40)
+    np.testing.assert_array_equal(rebuilt.q_values(obs), trained.q_values(obs))
+
+
+def test_a_checkpoint_from_before_the_network_option_holds_the_mlp(tmp_path):
+    state = _agent(**RESUME).state_dict()
+    del state["config"]["network"]
+    save_checkpoint(tmp_path, state, "agent")
+    assert checkpoint_agent_config(tmp_path)["network"] == "mlp"
+    _agent(seed=2, **RESUME).load_state_dict(state)
+    with pytest.raises(CheckpointError, match="network='mlp'"):
+        _agent(seed=2, **{**RESUME, "network": "station"}).load_state_dict(state)
 
 
 def test_a_non_dqn_checkpoint_is_refused(tmp_path):

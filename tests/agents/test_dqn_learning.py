@@ -1,7 +1,7 @@
 """DQN and Dueling Double DQN learn: on a small deterministic dispatch problem whose optimal policy is
 known (:mod:`tests.agents.toy_env`, no SUMO), both reach it within a fixed budget of training
 episodes, judged on held-out evaluation episodes against the optimal and the greedy travel times;
-an untrained agent does not pass the same bar."""
+an untrained agent does not pass the same bar. Both networks: the MLP and the one shared by the stations."""
 
 from __future__ import annotations
 
@@ -42,8 +42,8 @@ MAX_MEAN_EXCESS = 0.06
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
-def _train_and_evaluate(name: str, seed: int, train_episodes: int) -> dict:
-    agent = make_agent(name, M, np.random.default_rng(seed), **SETTINGS)
+def _train_and_evaluate(name: str, seed: int, train_episodes: int, network: str = "mlp") -> dict:
+    agent = make_agent(name, M, np.random.default_rng(seed), network=network, **SETTINGS)
     runner = SingleEnvRunner(ToyDispatchEnv())
     train = episode_specs(seed, range(train_episodes), TRAIN_STREAM)
     runner.run(train, agent, explore=True, learn=True)
@@ -78,9 +78,10 @@ def _missed(result: dict) -> list[str]:
     return [name for name, met in criteria.items() if not met]
 
 
+@pytest.mark.parametrize("network", ["mlp", "station"])
 @pytest.mark.parametrize("name", ["dqn", "dueling_ddqn"])
-def test_agent_learns_the_optimal_dispatch(name):
-    result = _train_and_evaluate(name, SEED, TRAIN_EPISODES)
+def test_agent_learns_the_optimal_dispatch(name, network):
+    result = _train_and_evaluate(name, SEED, TRAIN_EPISODES, network)
     agent = result["agent"]
     assert agent.gradient_steps > 1000
     assert agent.target_updates == agent.gradient_steps // SETTINGS["target_update"]
@@ -88,10 +89,11 @@ def test_agent_learns_the_optimal_dispatch(name):
     assert not _missed(result), {k: v for k, v in result.items() if k != "agent"}
 
 
+@pytest.mark.parametrize("network", ["mlp", "station"])
 @pytest.mark.parametrize("name", ["dqn", "dueling_ddqn"])
-def test_untrained_agent_does_not_pass(name):
+def test_untrained_agent_does_not_pass(name, network):
     """The same bar with no training: the test above is not passed by construction."""
-    result = _train_and_evaluate(name, SEED, 0)
+    result = _train_and_evaluate(name, SEED, 0, network)
     assert result["agent"].gradient_steps == 0
     assert f"optimal in >= {MIN_OPTIMAL_SHARE:.0%} of the episodes" in _missed(result), (
         {k: v for k, v in result.items() if k != "agent"})  # fmt: skip

@@ -1,5 +1,6 @@
 """Q-networks: output shapes, the layer sizes and activations the config asks for, the dueling
-combination ``V + A - mean(A)`` checked against the two streams, and the validation of sizes."""
+combination ``V + A - mean(A)`` checked against the two streams, the station network (its trunk per
+station by hand; a station's Q reads that station's features only), and the validation of sizes."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import pytest
 import torch
 from torch import nn
 
-from evcd.agents.networks import DuelingQNetwork, QNetwork, check_hidden, make_q_network
+from evcd.agents.networks import DuelingQNetwork, QNetwork, StationQNetwork, check_hidden, make_q_network
 
 
 def _seeded(obs_dim, n_actions, hidden, dueling, seed=0):
@@ -166,3 +167,72 @@ def test_make_q_network_rejects_bad_dimensions(dueling, key, obs_dim, n_actions,
     with pytest.raises(ValueError, match=key) as info:
         make_q_network(obs_dim, n_actions, (4,), dueling)
     assert named in str(info.value)
+
+
+# ---------------------------------------------------------------- the station network
+def _station(obs_dim, n_actions, hidden, dueling, seed=0):
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return make_q_network(obs_dim, n_actions, hidden, dueling, network="station")
+
+
+@pytest.mark.parametrize("dueling", [False, True])
+def test_make_q_network_picks_the_station_network(dueling):
+    net = make_q_network(12, 4, [8], dueling, network="station")
+    assert type(net) is StationQNetwork
+    assert (net.blocks, net.n_actions) == (3, 4)
+    # the trunk reads one station's block and its one-hot index
+    assert net.trunk[0].in_features == 3 + 4
+
+
+@pytest.mark.parametrize("dueling", [False, True])
+@pytest.mark.parametrize(("batch", "blocks", "n_actions"), [(1, 3, 5), (6, 4, 3), (2, 3, 1)])
+def test_station_network_output_shape(dueling, batch, blocks, n_actions):
+    q = _station(blocks * n_actions, n_actions, (8, 6), dueling)(_obs(batch, blocks * n_actions))
+    assert q.shape == (batch, n_actions)
+    assert torch.isfinite(q).all()
+
+
+def test_station_network_is_the_shared_trunk_by_hand():
+    """Q(s, a) = head(trunk([D_a, N_a, Z_a, onehot(a)])), the observation read block-major."""
+    m, blocks = 4, 3
+    net = _station(blocks * m, m, (5, 3), dueling=False)
+    x = _obs(2, blocks * m)
+    for a in range(m):
+        own = x[:, [a, m + a, 2 * m + a]]  # D_a, N_a, Z_a
+        index = torch.zeros(2, m)
+        index[:, a] = 1.0
+        expected = net.head(net.trunk(torch.cat([own, index], dim=1))).squeeze(1)
+        torch.testing.assert_close(net(x)[:, a], expected)
+
+
+def test_a_stations_q_value_reads_only_its_own_features():
+    """Changing station b's features moves Q(s, b) alone (plain); with the dueling heads, V(s)
+    moves every value alike, so the differences between the other stations stay."""
+    m = 5
+    x = _obs(3, 3 * m)
+    changed = x.clone()
+    changed[:, [1, m + 1, 2 * m + 1]] += 2.0  # station 1's D, N, Z
+    plain = _station(3 * m, m, (16, 8), dueling=False)
+    delta = plain(changed) - plain(x)
+    assert (delta[:, 1].abs() > 1e-6).all()
+    torch.testing.assert_close(delta[:, [0, 2, 3, 4]], torch.zeros(3, 4))
+    dueling = _station(3 * m, m, (16, 8), dueling=True)
+    before, after = dueling(x), dueling(changed)
+    others = [0, 2, 3, 4]
+    torch.testing.assert_close(after[:, others] - after[:, [0]], before[:, others] - before[:, [0]])
+
+
+def test_station_network_backpropagates_to_every_parameter():
+    for dueling in (False, True):
+        net = _station(9, 3, (8, 4), dueling)
+        net(_obs(5, 9)).sum().backward()
+        for name, p in net.named_parameters():
+            assert p.grad is not None, name
+
+
+def test_station_network_rejects_an_observation_not_made_of_station_blocks():
+    with pytest.raises(ValueError, match=r"obs_dim=10.*n_actions=3"):
+        make_q_network(10, 3, (4,), dueling=False, network="station")
+    with pytest.raises(ValueError, match="network='lstm': must be one of mlp, station"):
+        make_q_network(9, 3, (4,), dueling=False, network="lstm")
