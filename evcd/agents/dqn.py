@@ -182,7 +182,7 @@ class DQNAgent(Agent):
 
     def __repr__(self) -> str:
         c = self.config
-        return (f"DQNAgent({self.name}, hidden={list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
+        return (f"DQNAgent({self.name}, {c.network} {list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
                 f"buffer={c.buffer_size}, alpha={c.alpha:g}, target_update={c.target_update})")  # fmt: skip
 
     # ------------------------------------------------------------------ acting
