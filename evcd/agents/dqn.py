@@ -197,6 +197,16 @@ class DQNAgent(Agent):
         """The importance-sampling exponent now."""
         return min(1.0, linear_schedule(self.config.beta_start, 1.0, self.config.beta_steps, self.steps))
 
+    @property
+    def learning_rate(self) -> float:
+        """The learning rate of the next gradient step (``lr``, or its schedule to ``lr_end``)."""
+        c = self.config
+        return (
+            c.lr
+            if c.lr_end is None
+            else linear_schedule(c.lr, c.lr_end, c.lr_decay_steps, self.gradient_steps)
+        )
+
     def _input(self, obs: np.ndarray) -> torch.Tensor:
         x = np.asarray(obs, dtype=np.float32)
         if x.shape[-1:] != (self.obs_dim,):
@@ -302,6 +312,8 @@ class DQNAgent(Agent):
             per_sample = F.smooth_l1_loss(q, target, reduction="none")
         loss = (weights * per_sample).mean()
         self.optimizer.zero_grad(set_to_none=True)
+        for group in self.optimizer.param_groups:
+            group["lr"] = self.learning_rate
         loss.backward()
         if c.max_grad_norm is not None:
             nn.utils.clip_grad_norm_(self.online.parameters(), c.max_grad_norm)
@@ -342,6 +354,7 @@ class DQNAgent(Agent):
             "q_total": self.q_total,
             "epsilon": self.epsilon,
             "beta": self.beta,
+            "lr": self.learning_rate,
         }
 
     # ------------------------------------------------------------------ state

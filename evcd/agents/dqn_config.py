@@ -26,7 +26,10 @@ class DQNConfig:
         network: ``"mlp"`` (the paper's: one MLP reads the whole observation) or ``"station"`` (one
             trunk shared by the stations scores each from its own features and its index,
             :class:`~evcd.agents.networks.StationQNetwork`).
-        lr: Adam learning rate.
+        lr: Adam learning rate (at the first gradient step) ...
+        lr_end: ... moving linearly to this over ``lr_decay_steps`` gradient steps, then staying
+            (``None``: ``lr`` throughout).
+        lr_decay_steps: the length of that schedule, in gradient steps.
         batch_size: transitions per gradient step.
         buffer_size: replay capacity (transitions).
         gamma: discount per decision slot.
@@ -55,6 +58,8 @@ class DQNConfig:
     hidden: tuple[int, ...] = (512, 256)
     network: str = "mlp"
     lr: float = 1e-3
+    lr_end: float | None = None
+    lr_decay_steps: int = 10_000
     batch_size: int = 32
     buffer_size: int = 10_000
     gamma: float = 0.99
@@ -80,7 +85,7 @@ class DQNConfig:
         object.__setattr__(self, "hidden", check_hidden(self.hidden))
         for key in ("batch_size", "buffer_size", "train_freq", "gradient_steps", "target_update", "n_step"):
             check_int(key, getattr(self, key), minimum=1)
-        for key in ("learning_starts", "exploration_steps", "beta_steps"):
+        for key in ("learning_starts", "exploration_steps", "beta_steps", "lr_decay_steps"):
             check_int(key, getattr(self, key), minimum=0)
         if self.buffer_size < self.batch_size:
             raise ValueError(f"buffer_size={self.buffer_size} < batch_size={self.batch_size}: the buffer "
@@ -93,6 +98,8 @@ class DQNConfig:
         check_choice("network", self.network, NETWORKS)
         check_choice("exploration", self.exploration, EXPLORATIONS)
         check_choice("loss", self.loss, LOSSES)
+        if self.lr_end is not None:
+            check_real("lr_end", self.lr_end, low=0.0, low_open=True)
         if self.max_grad_norm is not None:
             check_real("max_grad_norm", self.max_grad_norm, low=0.0, low_open=True)
 

@@ -4,7 +4,8 @@ Tags, all at ``global_step`` = transitions seen (so that a resumed run can purge
 interrupted one wrote after its last checkpoint):
 
 - ``charts/travel_time``, ``charts/episodic_return``, ``charts/queue_wait``, ``charts/switches``,
-  ``charts/truncated`` (per training episode), ``charts/epsilon``, ``charts/transitions_per_second``;
+  ``charts/truncated`` (per training episode), ``charts/epsilon``, ``charts/learning_rate``,
+  ``charts/transitions_per_second``;
 - ``losses/td_loss`` and ``losses/q_values``: means over the gradient steps of the episode;
 - ``eval/travel_time`` (the agent), and per baseline rule ``eval/<rule>_travel_time`` and
   ``eval/paired_difference_<rule>`` (agent minus rule on the same episodes);
@@ -82,6 +83,8 @@ class TrainLog:
         w = self.writer
         if "epsilon" in stats:
             w.add_scalar("charts/epsilon", stats["epsilon"], step)
+        if "lr" in stats:
+            w.add_scalar("charts/learning_rate", stats["lr"], step)
         if wall_s > 0:
             w.add_scalar("charts/transitions_per_second", step / wall_s, step)
         now = self._read(stats)

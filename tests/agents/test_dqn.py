@@ -620,6 +620,32 @@ def test_hard_target_update_every_target_update_gradient_steps():
     assert checked == 7  # 37 gradient steps
 
 
+def test_learning_rate_is_constant_without_lr_end():
+    agent = _agent(lr=3e-3, learning_starts=1, buffer_size=64, batch_size=4)
+    for t in _transitions(1, 40):
+        agent.observe(t)
+    assert agent.gradient_steps > 30
+    assert agent.learning_rate == 3e-3
+    assert [g["lr"] for g in agent.optimizer.param_groups] == [3e-3]
+
+
+def test_learning_rate_moves_linearly_to_lr_end_then_stays():
+    """The step after k gradient steps uses lr + (lr_end - lr) * k / lr_decay_steps (by hand), and
+    lr_end once the schedule is over; the optimizer really steps with it."""
+    agent = _agent(lr=1e-2, lr_end=1e-3, lr_decay_steps=10, learning_starts=1, buffer_size=64, batch_size=4)
+    seen = []
+    for t in _transitions(1, 30):
+        before = agent.gradient_steps
+        expected = 1e-2 + (1e-3 - 1e-2) * min(before, 10) / 10
+        assert agent.learning_rate == pytest.approx(expected)
+        agent.observe(t)
+        if agent.gradient_steps > before:
+            seen.append(agent.optimizer.param_groups[0]["lr"])
+            assert seen[-1] == pytest.approx(expected)
+    assert seen[0] == pytest.approx(1e-2) and seen[-1] == pytest.approx(1e-3)
+    assert agent.stats()["lr"] == pytest.approx(1e-3)
+
+
 def test_soft_update_moves_the_target_by_lerp():
     agent = _agent(tau=0.3)
     _perturb(agent.target, seed=21)
@@ -800,7 +826,7 @@ def test_learning_changes_only_the_online_network_between_target_updates():
     assert stats["gradient_steps"] == 5.0
     assert stats["loss_total"] == pytest.approx(sum(losses))
     assert set(stats) == {"transitions", "gradient_steps", "target_updates", "loss_total", "q_total",
-                          "epsilon", "beta"}  # fmt: skip
+                          "epsilon", "beta", "lr"}  # fmt: skip
 
 
 # -- validation -----------------------------------------------------------------------------------------
@@ -826,6 +852,9 @@ def test_learning_changes_only_the_online_network_between_target_updates():
         ({"loss": "l1"}, "loss='l1'"),
         ({"exploration": "bogus"}, "exploration='bogus'"),
         ({"network": "lstm"}, "network='lstm'"),
+        ({"lr_end": 0.0}, "lr_end=0.0"),
+        ({"lr_end": -1e-4}, "lr_end=-0.0001"),
+        ({"lr_decay_steps": -1}, "lr_decay_steps=-1"),
         ({"target_update": 0}, "target_update=0"),
         ({"n_step": 0}, "n_step=0"),
         ({"train_freq": 0}, "train_freq=0"),
@@ -878,8 +907,8 @@ RESUME = {"hidden": (16, 16), "batch_size": 8, "buffer_size": 200, "learning_sta
           "target_update": 7, "exploration_steps": 300, "lr": 3e-3}  # fmt: skip
 
 
-def _mid_training(name: str, exploration: str = "slot") -> DQNAgent:
-    agent = make_agent(name, M, np.random.default_rng(30), exploration=exploration, **RESUME)
+def _mid_training(name: str, exploration: str = "slot", **extra) -> DQNAgent:
+    agent = make_agent(name, M, np.random.default_rng(30), exploration=exploration, **RESUME, **extra)
     _train(agent, seed=31, episodes=range(25))
     assert agent.gradient_steps > 20
     assert agent.target_updates > 2
@@ -896,14 +925,18 @@ def _continue(agent: DQNAgent) -> tuple[list, list]:
 
 
 @pytest.mark.parametrize("via", ["memory", "checkpoint"])
-@pytest.mark.parametrize(("name", "exploration"), [("dqn", "slot"), ("dueling_ddqn", "episode")])
-def test_restored_agent_continues_exactly(tmp_path, via, name, exploration):
-    original = _mid_training(name, exploration)
+@pytest.mark.parametrize(
+    ("name", "exploration", "extra"),
+    [("dqn", "slot", {}), ("dueling_ddqn", "episode", {}),
+     ("dueling_ddqn", "slot", {"lr_end": 1e-4, "lr_decay_steps": 300})],  # mid-schedule at the save
+)  # fmt: skip
+def test_restored_agent_continues_exactly(tmp_path, via, name, exploration, extra):
+    original = _mid_training(name, exploration, **extra)
     state = original.state_dict()
     if via == "checkpoint":
         save_checkpoint(tmp_path, {"format": "evcd.train/1", "agent": state, "episode": 25}, "ckpt_25")
         state = load_checkpoint(tmp_path)["agent"]
-    restored = make_agent(name, M, np.random.default_rng(999), exploration=exploration, **RESUME)
+    restored = make_agent(name, M, np.random.default_rng(999), exploration=exploration, **RESUME, **extra)
     assert not _equal(_params(restored.online), _params(original.online))
     restored.load_state_dict(state)
     assert restored.stats() == original.stats()

@@ -185,7 +185,7 @@ def test_tensorboard_has_the_curves_and_the_config(trained):
     acc = EventAccumulator(str(run_dir / "tensorboard"), size_guidance={"scalars": 0, "tensors": 0})
     acc.Reload()
     scalars = set(acc.Tags()["scalars"])
-    expected = {"charts/travel_time", "charts/episodic_return", "charts/epsilon",
+    expected = {"charts/travel_time", "charts/episodic_return", "charts/epsilon", "charts/learning_rate",
                 "charts/transitions_per_second", "charts/switches", "losses/td_loss", "losses/q_values",
                 "eval/travel_time", "eval/greedy_travel_time", "eval/paired_difference_greedy"}  # fmt: skip
     assert expected <= scalars
