@@ -1179,3 +1179,17 @@ def test_no_global_random_state_is_used():
 
     assert torch.equal(torch.random.get_rng_state(), torch_before)
     assert _np_state_equal(np.random.get_state(), np_before)
+
+
+def test_the_station_network_reads_the_fleets_h_per_station():
+    """On the fleet's [D, N, Z, H] (obs_blocks=4) the station network scores each station from its
+    own four features: the guided EVs heading to station 1 move its Q-value alone (plain DQN)."""
+    m = 3
+    agent = DQNAgent(m, np.random.default_rng(0), obs_blocks=4, network="station", hidden=(16,))
+    obs = _obs(np.random.default_rng(1), 5, dim=4 * m)
+    more = obs.copy()
+    more[:, 3 * m + 1] += 3.0  # H of station 1
+    delta = agent.q_values(more) - agent.q_values(obs)
+    assert agent.q_values(obs).shape == (5, m)
+    assert (np.abs(delta[:, 1]) > 1e-6).all()
+    np.testing.assert_allclose(delta[:, [0, 2]], 0.0, atol=1e-6)
