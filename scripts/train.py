@@ -92,8 +92,10 @@ def _validation_days(
     return days
 
 
-def _window(cfg: DictConfig) -> dict[str, Any]:
-    window = cfg.train.validation.departure_window
+def _window(cfg: DictConfig, key: str) -> dict[str, Any]:
+    """``{"departure_window": ...}`` from ``key`` (``train.departure_window`` or
+    ``train.validation.departure_window``), or nothing where it is null (``env.departure_window``)."""
+    window = OmegaConf.select(cfg, key)
     return {"departure_window": tuple(window)} if window is not None else {}
 
 
@@ -132,13 +134,17 @@ def build(cfg: DictConfig) -> dict[str, Any]:
     params.pop("checkpoint", None)
     base = env_kwargs(cfg)
     envs = {
-        "train": ChargingNavEnv(**{**base, "demand_seeds": train_days}),
+        "train": ChargingNavEnv(
+            **{**base, "demand_seeds": train_days, **_window(cfg, "train.departure_window")}
+        ),
         "eval": ChargingNavEnv(**{**base, "demand_seeds": eval_days}),
     }  # validates every environment value; loads the scenario; no SUMO yet
     rules: dict[str, Any] = {}
     if settings.validation.every and dispatcher_learns(name):
         days = _validation_days(cfg, train_days, eval_days)
-        envs["validation"] = ChargingNavEnv(**{**base, "demand_seeds": days, **_window(cfg)})
+        envs["validation"] = ChargingNavEnv(
+            **{**base, "demand_seeds": days, **_window(cfg, "train.validation.departure_window")}
+        )
         rules = {str(r): make_dispatcher(str(r), envs["validation"], baseline_rng(seed))
                  for r in cfg.train.validation.rules}  # fmt: skip
     agent = make_dispatcher(name, envs["train"], agent_rng(settings.seed), **params)
@@ -175,13 +181,15 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
         params["config"] = learner_config(cfg.learner)
     base = fleet_kwargs(cfg)  # refuses the single target's options
     envs = {
-        "train": FleetEnv(**{**base, "demand_seeds": train_days}),
+        "train": FleetEnv(**{**base, "demand_seeds": train_days, **_window(cfg, "train.departure_window")}),
         "eval": FleetEnv(**{**base, "demand_seeds": eval_days}),
     }  # validates every value (guided_share in (0, 1]); no SUMO yet
     rules: dict[str, Any] = {}
     if settings.validation.every and learns:
         days = _validation_days(cfg, train_days, eval_days)
-        envs["validation"] = FleetEnv(**{**base, "demand_seeds": days, **_window(cfg)})
+        envs["validation"] = FleetEnv(
+            **{**base, "demand_seeds": days, **_window(cfg, "train.validation.departure_window")}
+        )
         rules = {str(r): _fleet_rule(r, envs["validation"], seed, "train.validation.rules")
                  for r in cfg.train.validation.rules}  # fmt: skip
     for env in envs.values():

@@ -146,6 +146,22 @@ def test_the_days_of_every_shipped_experiment_are_disjoint(experiment):
     assert set(cfg.train.validation.days) <= days["tuning"]
 
 
+def test_training_departures_follow_train_departure_window(small, tmp_path):
+    """train.departure_window narrows the training departures only: the evaluation keeps
+    env.departure_window (06:00-06:30 on the grid)."""
+    out = tmp_path / "run"
+    proc = run_train(*small, "agent=dqn", "train.episodes=4", "train.checkpoint_every=2",
+                     "train.departure_window=[22500,23400]", f"hydra.run.dir={out}")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    train = [float(r["departure"]) for r in read_csv(out / "train_episodes.csv")]
+    evaluation = [float(r["departure"]) for r in read_csv(out / "episodes.csv")]
+    assert len(train) == 4 and all(22500 <= d <= 23400 for d in train)
+    assert all(21600 <= d <= 23400 for d in evaluation)
+    proc = run_train(*small, "agent=dqn", "train.departure_window=[23400,21600]")
+    out_text = proc.stdout + proc.stderr
+    assert proc.returncode == 2 and "departure_window" in out_text and "23400" in out_text, out_text[-2000:]
+
+
 def test_each_seed_can_run_on_its_own_evaluation_day(small, tmp_path):
     out = tmp_path / "run"
     proc = run_train(*small, "agent=greedy", "eval.day_per_seed=true", "days.evaluation=[5,6,7]", "seed=4",
