@@ -210,9 +210,10 @@ def test_the_learner_block_is_the_dqn_config():
     assert (peak.gamma, peak.exploration, peak.loss, peak.target_update) == (0.9, "episode", "huber", 250)
     assert peak.n_step == 3  # the peak experiment's own addition to the preset
     preset = learner_of(compose_train("~experiment", "learner=peak"))
-    assert peak == dataclasses.replace(preset, n_step=3)
+    assert peak == dataclasses.replace(preset, n_step=3, network="station")
     table = learner_of(compose_train("experiment=table"))
-    assert table == dataclasses.replace(preset, gamma=0.97, exploration_steps=2000)  # the peak preset + two
+    # the peak preset + three
+    assert table == dataclasses.replace(preset, gamma=0.97, exploration_steps=2000, network="station")
     with pytest.raises(ConfigCompositionException, match="bogus"):
         compose_train("learner.bogus=1")
     with pytest.raises(ConfigCompositionException, match="lr"):
