@@ -198,8 +198,11 @@ def plot_validation_curves(
     rules: Mapping[tuple[str, int], Mapping[str, float]],
     path: str | Path,
     colors: Mapping[str, Any] | None = None,
+    gaps: Mapping[tuple[str, int], Mapping[str, Sequence[Sequence[tuple[int, float]]]]] | None = None,
+    gap_rule: str = "queue_aware",
 ) -> Path:
-    """Save the periodic held-out validation: a panel per (regime, evs), a line per learner.
+    """Save the periodic held-out validation: a panel per (regime, evs), a line per learner; with
+    ``gaps``, a second row of panels with each seed's paired difference to ``gap_rule``.
 
     Args:
         panels: (regime, evs) -> agent -> each seed's points ``(training episodes done, mean travel
@@ -208,16 +211,22 @@ def plot_validation_curves(
         rules: (regime, evs) -> rule -> its validation mean averaged over seeds (horizontal lines).
         path: PNG to write (atomically).
         colors: agent -> colour.
+        gaps: (regime, evs) -> agent -> each seed's points ``(training episodes done, learner minus
+            gap_rule on the same validation episodes)``: a thin line per seed, a thick one for the
+            mean over seeds, on a symmetric log scale around 0 (each seed has its own validation
+            episodes, so this is where a reader sees, seed by seed, when the learner stops closing
+            in on the rule).
+        gap_rule: the rule of ``gaps``, for the labels.
     """
     keys = sorted(panels)
     colors = colors or agent_colors(list(dict.fromkeys(a for p in panels.values() for a in p)))
-    fig = Figure(figsize=(max(6.5, 5.4 * len(keys)), 4.8))
-    axes = fig.subplots(1, len(keys), squeeze=False)[0]
-    for ax, key in zip(axes, keys, strict=True):
+    rows = 2 if gaps else 1
+    fig = Figure(figsize=(max(6.5, 5.4 * len(keys)), 4.8 * rows))
+    grid = fig.subplots(rows, len(keys), squeeze=False)
+    for ax, key in zip(grid[0], keys, strict=True):
         shown = []
         for agent, runs in panels[key].items():
-            steps = sorted({e for run in runs for e, _ in run})
-            values = np.array([[dict(run).get(e, math.nan) for e in steps] for run in runs], dtype=float)
+            steps, values = _seed_matrix(runs)
             with np.errstate(all="ignore"):
                 mean = np.nanmean(values, axis=0)
             ax.fill_between(steps, np.nanmin(values, axis=0), np.nanmax(values, axis=0), color=colors[agent],
@@ -226,10 +235,41 @@ def plot_validation_curves(
             shown.append(values[np.isfinite(values)])
         _finish_curve_axes(ax, rules.get(key, {}), shown, f"regime {key[0]}, {key[1]} EVs",
                            "validation travel time (s, log)")  # fmt: skip
+    if gaps:
+        for ax, key in zip(grid[1], keys, strict=True):
+            _plot_gap_panel(ax, gaps.get(key, {}), colors, gap_rule)
     fig.suptitle("Held-out validation during training: the policy without exploration on the same\n"
                  "episodes of the tuning days (band: min-max over seeds)", fontsize=10)  # fmt: skip
     fig.tight_layout()
     return atomic_write_png(fig, path)
+
+
+def _seed_matrix(runs: Sequence[Sequence[tuple[int, float]]]) -> tuple[list[int], np.ndarray]:
+    """The union of the seeds' steps and a ``(seeds, steps)`` array of their values (NaN where a seed
+    has no point)."""
+    steps = sorted({e for run in runs for e, _ in run})
+    return steps, np.array([[dict(run).get(e, math.nan) for e in steps] for run in runs], dtype=float)
+
+
+def _plot_gap_panel(
+    ax: Any, gaps: Mapping[str, Sequence[Sequence[tuple[int, float]]]], colors: Mapping[str, Any], rule: str
+) -> None:
+    """One panel of paired validation differences: a thin line per seed, the mean over seeds thick."""
+    for agent, runs in gaps.items():
+        steps, values = _seed_matrix(runs)
+        for row in values:
+            ax.plot(steps, row, "-", color=colors[agent], lw=0.8, alpha=0.45)
+        with np.errstate(all="ignore"):
+            mean = np.nanmean(values, axis=0)
+        ax.plot(steps, mean, "o-", color=colors[agent], lw=2.0,
+                label=f"{agent}: mean of {len(runs)} seeds (thin: each seed)")  # fmt: skip
+    ax.axhline(0.0, color="0.3", lw=1.0, ls=":", label=f"{rule} (0)")
+    ax.set_yscale("symlog", linthresh=10.0)
+    ax.set_xlabel("training episodes played")
+    ax.set_ylabel(f"learner - {rule} (s, symlog)")
+    ax.set_title(f"learner - {rule}, each seed on its own validation episodes (< 0: faster)", fontsize=9)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="upper left")
 
 
 def plot_scenario_day(

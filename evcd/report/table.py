@@ -47,6 +47,8 @@ MD_NAME = "results.md"
 BARS_PNG = "results_bars.png"
 CURVES_PNG = "learning_curves.png"
 VALIDATION_PNG = "validation_curves.png"
+#: The rule the validation figure's lower panels pair each learner with, seed by seed.
+GAP_RULE = "queue_aware"
 
 #: Column order of agents; other agents follow alphabetically.
 AGENT_ORDER = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
@@ -319,6 +321,21 @@ def validation_points(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[s
     return dict(sorted(out.items()))
 
 
+def validation_gaps(
+    jobs: Sequence[JobResult], rule: str = "queue_aware"
+) -> dict[tuple[str, int], dict[str, list[Points]]]:
+    """(regime, evs) -> agent -> each seed's validation points minus ``rule``'s validation mean in the
+    same job (the same episodes: a paired difference per point; negative: the learner is faster).
+    Jobs whose validation did not run ``rule`` are left out."""
+    out: dict[tuple[str, int], dict[str, list[Points]]] = {}
+    for job in jobs:
+        base = dict(job.validation_rules).get(rule)
+        if job.validation and base is not None:
+            gaps = [(episodes, mean - base) for episodes, mean in job.validation]
+            out.setdefault((job.regime, job.evs), {}).setdefault(job.agent, []).append(gaps)
+    return dict(sorted(out.items()))
+
+
 def validation_rule_means(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, float]]:
     """(regime, evs) -> rule -> its validation mean over the seeds of the jobs that validated."""
     values: dict[tuple[str, int], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
@@ -377,7 +394,8 @@ def make_table(
     validation = validation_points(collection.jobs)
     if validation:
         rules = validation_rule_means(collection.jobs)
-        paths.append(plot_validation_curves(validation, rules, out / VALIDATION_PNG, colors))
+        gaps = validation_gaps(collection.jobs, GAP_RULE)
+        paths.append(plot_validation_curves(validation, rules, out / VALIDATION_PNG, colors, gaps, GAP_RULE))
     figures = [p.name for p in paths if p.suffix == ".png"]
     markdown = results_markdown(collection, resamples, bootstrap_seed, figures)
     paths.insert(1, atomic_write_text(out / MD_NAME, markdown))

@@ -35,6 +35,7 @@ from evcd.report.table import (
     MD_NAME,
     VALIDATION_PNG,
     make_table,
+    validation_gaps,
     validation_points,
     validation_rule_means,
 )
@@ -517,6 +518,12 @@ def test_validation_curves_average_the_seeds_and_stay_out_of_the_csv(tmp_path):
     assert validation_rule_means(jobs.values()) == {("table", 200): {"greedy": 450.5, "queue_aware": 321.5}}
     seeds = [[(100, 450.0), (200, 400.0)], [(100, 460.0), (200, 410.0)]]
     assert validation_points(jobs.values())[("table", 200)]["dqn"] == seeds
+    # paired with each seed's own queue_aware mean on the same episodes (320 and 323 s)
+    assert validation_gaps(jobs.values()) == {
+        ("table", 200): {"dqn": [[(100, 130.0), (200, 80.0)], [(100, 137.0), (200, 87.0)]]}
+    }
+    assert validation_gaps(jobs.values(), "greedy")[("table", 200)]["dqn"][1] == [(100, 9.0), (200, -41.0)]
+    assert validation_gaps(jobs.values(), "central") == {}  # no job validated against it
     out = make_table([root], tmp_path / "out", resamples=200)
     assert VALIDATION_PNG in {p.name for p in out.paths}
     image = matplotlib.image.imread(tmp_path / "out" / VALIDATION_PNG)
