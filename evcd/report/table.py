@@ -10,8 +10,10 @@
    then the share of the greedy -> hindsight gap each of :data:`GAP_AGENTS` closes, with its paired
    bootstrap interval (:mod:`evcd.report.seed_stats`). Agents in the order :data:`AGENT_ORDER`.
 3. **Write** into the output directory (nothing existing is overwritten unless ``overwrite``):
-   ``results.csv`` (one row per job), ``results.md`` (the tables), ``results_bars.png`` and
-   ``learning_curves.png`` (:mod:`evcd.report.figures`).
+   ``results.csv`` (one row per job), ``results.md`` (the tables), ``results_bars.png``,
+   ``learning_curves.png`` and, where learners validated, ``validation_curves.png`` (the periodic
+   held-out validation, and each seed paired with :data:`GAP_RULE` on its own validation
+   episodes) (:mod:`evcd.report.figures`).
 """
 
 from __future__ import annotations
