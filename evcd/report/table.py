@@ -324,7 +324,7 @@ def validation_points(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[s
 
 
 def validation_gaps(
-    jobs: Sequence[JobResult], rule: str = "queue_aware"
+    jobs: Sequence[JobResult], rule: str = GAP_RULE
 ) -> dict[tuple[str, int], dict[str, list[Points]]]:
     """(regime, evs) -> agent -> each seed's validation points minus ``rule``'s validation mean in the
     same job (the same episodes: a paired difference per point; negative: the learner is faster).
