@@ -237,7 +237,7 @@ def plot_validation_curves(
                            "validation travel time (s, log)")  # fmt: skip
     if gaps:
         for ax, key in zip(grid[1], keys, strict=True):
-            _plot_gap_panel(ax, gaps.get(key, {}), colors, gap_rule)
+            _plot_gap_panel(ax, gaps.get(key, {}), colors, gap_rule, f"{key[1]} EVs")
     fig.suptitle("Held-out validation during training: the policy without exploration on the same\n"
                  "episodes of the tuning days (band: min-max over seeds)", fontsize=10)  # fmt: skip
     fig.tight_layout()
@@ -252,9 +252,14 @@ def _seed_matrix(runs: Sequence[Sequence[tuple[int, float]]]) -> tuple[list[int]
 
 
 def _plot_gap_panel(
-    ax: Any, gaps: Mapping[str, Sequence[Sequence[tuple[int, float]]]], colors: Mapping[str, Any], rule: str
+    ax: Any,
+    gaps: Mapping[str, Sequence[Sequence[tuple[int, float]]]],
+    colors: Mapping[str, Any],
+    rule: str,
+    where: str,
 ) -> None:
-    """One panel of paired validation differences: a thin line per seed, the mean over seeds thick."""
+    """One panel of paired validation differences: a thin line per seed, the mean over seeds thick;
+    ``where`` (e.g. ``"400 EVs"``) heads its title."""
     for agent, runs in gaps.items():
         steps, values = _seed_matrix(runs)
         for row in values:
@@ -267,7 +272,8 @@ def _plot_gap_panel(
     ax.set_yscale("symlog", linthresh=10.0)
     ax.set_xlabel("training episodes played")
     ax.set_ylabel(f"learner - {rule} (s, symlog)")
-    ax.set_title(f"learner - {rule}, each seed on its own validation episodes (< 0: faster)", fontsize=9)
+    ax.set_title(f"{where}: learner - {rule}, paired per seed\n"
+                 "(each seed on its own validation episodes; < 0: faster)", fontsize=9)  # fmt: skip
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="upper left")
 
