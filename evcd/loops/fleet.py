@@ -12,8 +12,10 @@ Seeds: the episode's ``EpisodeSpec`` gives the ``reset`` seed (day and guided EV
 
 from __future__ import annotations
 
+import logging
 import math
 import time as wallclock
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +29,8 @@ from evcd.env.runners.base import EpisodeSpec, Policy
 from evcd.env.transition import Transition
 from evcd.loops.seeds import TRAIN_STREAM, bootstrap_rng, episode_spec
 from evcd.loops.stats import bootstrap_ci
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -151,7 +155,12 @@ def evaluate_fleet(
 ) -> tuple[list[FleetEpisode], dict[str, Any]]:
     """Play ``episodes`` fleet episodes (evaluation stream of ``seed``, no exploration); return them and
     their summary: per measure the mean over episodes, and for the guided and all-EV travel times the
-    95 % bootstrap interval of the mean over episodes (each episode's mean is one value)."""
+    95 % bootstrap interval of the mean over episodes (each episode's mean is one value).
+
+    ``distinct_episodes`` counts the episodes that differ in day or guided agents: at ``guided_share``
+    1 nothing is drawn, so an episode is fixed by its day and two episodes of one day are the same
+    episode played twice (a deterministic policy then repeats its result, and the interval counts
+    the copies as independent); a warning says so when it happens."""
     played: list[FleetEpisode] = []
     with tqdm(
         total=episodes, desc=f"fleet {getattr(agent, 'name', '')}", unit="ep", disable=not progress
@@ -172,4 +181,18 @@ def evaluate_fleet(
             sum(ep.transitions if key == "transitions" else getattr(ep.measures, key) for ep in played)
         )
     summary["mean_wall_s"] = float(np.mean([ep.wall_s for ep in played]))
+    summary["distinct_episodes"] = distinct = distinct_episodes(played)
+    if distinct < len(played):
+        log.warning(
+            "%s: only %d of %d fleet episodes differ in day or guided EVs (at guided_share %g an "
+            "episode is fixed by its day when every EV is guided): the interval counts the repeats as "
+            "independent; evaluate on more days (or a guided_share below 1)",
+            getattr(agent, "name", "fleet"), distinct, len(played), env.guided_share,
+        )  # fmt: skip
     return played, summary
+
+
+def distinct_episodes(played: Sequence[FleetEpisode]) -> int:
+    """How many of ``played`` differ in their day or in the set of guided EVs that became agents
+    (episodes equal in both are the same deterministic episode)."""
+    return len({(ep.day, frozenset(ep.returns)) for ep in played})

@@ -75,7 +75,7 @@ def _csv(path: Path) -> list[dict[str, str]]:
 
 
 def test_a_fleet_run_writes_its_files_and_pairs_every_rule_on_the_same_episodes(
-    fleet, tmp_path, one_torch_thread
+    fleet, tmp_path, one_torch_thread, caplog
 ) -> None:
     env = fleet["train"]
     agent = _agent(env)
@@ -113,6 +113,11 @@ def test_a_fleet_run_writes_its_files_and_pairs_every_rule_on_the_same_episodes(
     ]
     # the evaluation: the agent's mean is the mean of its episodes; the rules on the same episodes
     rows = _csv(run / "fleet_episodes.csv")
+    # one day, every EV guided: the two evaluation episodes are one episode played twice, and the
+    # run says so (in its summary and in a warning)
+    assert rows[0]["guided_travel"] == rows[1]["guided_travel"]
+    assert data["summary"]["episodes"] == 2 and data["summary"]["distinct_episodes"] == 1
+    assert any("only 1 of 2 fleet episodes differ" in r.getMessage() for r in caplog.records)
     assert data["summary"]["guided_travel"] == pytest.approx(
         np.mean([float(r["guided_travel"]) for r in rows])
     )
