@@ -184,9 +184,9 @@ def evaluate_fleet(
     summary["distinct_episodes"] = distinct = distinct_episodes(played)
     if distinct < len(played):
         log.warning(
-            "%s: only %d of %d fleet episodes differ in day or guided EVs (at guided_share %g an "
-            "episode is fixed by its day when every EV is guided): the interval counts the repeats as "
-            "independent; evaluate on more days (or a guided_share below 1)",
+            "%s: only %d of %d fleet episodes differ in day or guided EVs (guided_share %g; at 1 an "
+            "episode is fixed by its day): the interval counts the repeats as independent episodes; "
+            "evaluate on more days than episodes repeat, or with a guided_share below 1",
             getattr(agent, "name", "fleet"), distinct, len(played), env.guided_share,
         )  # fmt: skip
     return played, summary
