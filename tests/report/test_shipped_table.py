@@ -10,8 +10,9 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from evcd.report.table import AGENT_ORDER
+
 ROOT = Path(__file__).resolve().parents[2]
-AGENTS = {"random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight"}
 
 
 def _rows() -> list[dict[str, str]]:
@@ -23,7 +24,7 @@ def test_the_shipped_table_holds_every_job_of_its_sweep():
     rows = _rows()
     jobs = {(r["regime"], r["agent"], int(r["evs"]), int(r["seed"])) for r in rows}
     assert len(jobs) == len(rows), "a job appears twice"
-    expected = {("table", a, evs, seed) for a in AGENTS for evs in (200, 300, 400) for seed in range(5)}
+    expected = {("table", a, evs, seed) for a in AGENT_ORDER for evs in (200, 300, 400) for seed in range(5)}
     assert jobs == expected
     assert all(int(r["eval_episodes"]) == 50 for r in rows)
 
