@@ -38,7 +38,7 @@ from evcd.env.runners import check_engine, make_runner
 from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.fleet_train import FleetTrainSettings, train_and_evaluate_fleet
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
-from evcd.loops.seeds import agent_rng, baseline_rng
+from evcd.loops.seeds import agent_rng, baseline_rng, days_of_seed
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
 from evcd.utils.checkpoint import CheckpointError
@@ -68,10 +68,13 @@ def check_task(cfg: DictConfig) -> str:
 
 
 def _days(cfg: DictConfig, seed: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
-    """The training and evaluation days (one held-out day per seed with ``eval.day_per_seed``)."""
+    """The training and evaluation days. With ``eval.day_per_seed`` each seed has its own held-out days
+    (:func:`~evcd.loops.seeds.days_of_seed`): one for the single target, one per evaluation episode for
+    the fleet (a fleet episode is a whole window of its day)."""
     train_days, eval_days = config_days(cfg, "train.days"), config_days(cfg, "eval.days")
     if bool(cfg.eval.day_per_seed):
-        eval_days = (eval_days[seed % len(eval_days)],)
+        count = check_int("eval.episodes", cfg.eval.episodes, minimum=1) if cfg.task == "fleet" else 1
+        eval_days = days_of_seed(eval_days, seed, count)
     if tuple(cfg.env.demand_seeds) != train_days:
         raise ValueError(f"env.demand_seeds={list(cfg.env.demand_seeds)}: train.py sets it from "
                          f"train.days (and eval.days); set those instead")  # fmt: skip

@@ -7,11 +7,15 @@ parameter sharing: one network for every guided EV, every EV's transitions into 
 EV has its own episode state, so n-step returns never mix two EVs).
 
 Seeds: the episode's ``EpisodeSpec`` gives the ``reset`` seed (day and guided EVs) and a
-``SeedSequence`` from which each guided EV, in the order it appears, gets its own generator.
+``SeedSequence`` from which each guided EV, in the order it appears, gets its own generator. Training
+episodes draw their day from that seed; evaluation and validation episodes take the env's days in turn
+(:func:`fleet_spec`), so that ``len(days)`` consecutive episodes are on distinct days: at
+``guided_share`` 1 a fleet episode is fixed by its day, and a drawn day may repeat.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time as wallclock
@@ -27,8 +31,9 @@ from evcd.env.fleet import FleetEnv
 from evcd.env.fleet.measures import FleetMeasures
 from evcd.env.runners.base import EpisodeSpec, Policy
 from evcd.env.transition import Transition
-from evcd.loops.seeds import TRAIN_STREAM, bootstrap_rng, episode_spec
+from evcd.loops.seeds import EVAL_STREAM, TRAIN_STREAM, bootstrap_rng, episode_spec
 from evcd.loops.stats import bootstrap_ci
+from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +64,14 @@ class FleetEpisode:
         """One flat row (for CSV / JSON)."""
         return {"episode": self.index, "day": self.day, "transitions": self.transitions,
                 "wall_s": round(self.wall_s, 3), **self.measures.to_dict()}  # fmt: skip
+
+
+def fleet_spec(seed: int, index: int, days: int, stream: int = EVAL_STREAM) -> EpisodeSpec:
+    """Fleet episode ``index`` of ``stream`` of run ``seed`` on the env's day ``index mod days`` (days in
+    turn): its reset seed (which draws the guided EVs) and agents' seeds are :func:`episode_spec`'s."""
+    check_int("days", days, minimum=1)
+    spec = episode_spec(seed, index, stream)
+    return dataclasses.replace(spec, options={"day": index % days})
 
 
 def play_fleet(
@@ -153,20 +166,21 @@ def fleet_dispatcher_learns(name: Any) -> bool:
 def evaluate_fleet(
     env: FleetEnv, agent: Policy, episodes: int, seed: int, *, progress: bool = True, resamples: int = 10_000
 ) -> tuple[list[FleetEpisode], dict[str, Any]]:
-    """Play ``episodes`` fleet episodes (evaluation stream of ``seed``, no exploration); return them and
-    their summary: per measure the mean over episodes, and for the guided and all-EV travel times the
-    95 % bootstrap interval of the mean over episodes (each episode's mean is one value).
+    """Play ``episodes`` fleet episodes (evaluation stream of ``seed``, the env's days in turn:
+    :func:`fleet_spec`; no exploration); return them and their summary: per measure the mean over
+    episodes, and for the guided and all-EV travel times the 95 % bootstrap interval of the mean over
+    episodes (each episode's mean is one value).
 
     ``distinct_episodes`` counts the episodes that differ in day or guided agents: at ``guided_share``
     1 nothing is drawn, so an episode is fixed by its day and two episodes of one day are the same
     episode played twice (a deterministic policy then repeats its result, and the interval counts
-    the copies as independent); a warning says so when it happens."""
+    the copies as independent); a warning says so when it happens (more episodes than days at share 1)."""
     played: list[FleetEpisode] = []
     with tqdm(
         total=episodes, desc=f"fleet {getattr(agent, 'name', '')}", unit="ep", disable=not progress
     ) as bar:
         for i in range(episodes):
-            played.append(play_fleet(env, agent, episode_spec(seed, i)))
+            played.append(play_fleet(env, agent, fleet_spec(seed, i, len(env.days))))
             bar.update(1)
     rng = bootstrap_rng(seed)
     summary: dict[str, Any] = {"episodes": episodes, "seed": seed}
@@ -186,7 +200,7 @@ def evaluate_fleet(
         log.warning(
             "%s: only %d of %d fleet episodes differ in day or guided EVs (guided_share %g; at 1 an "
             "episode is fixed by its day): the interval counts the repeats as independent episodes; "
-            "evaluate on more days than episodes repeat, or with a guided_share below 1",
+            "evaluate on at least as many days as episodes, or with a guided_share below 1",
             getattr(agent, "name", "fleet"), distinct, len(played), env.guided_share,
         )  # fmt: skip
     return played, summary

@@ -17,9 +17,9 @@ closed before the next phase plays.
    at the end; ``resume=True`` continues from it, and since a fleet episode depends only on its seed
    and the agent's state, a resumed run ends with the weights of an uninterrupted one (tested).
 2. **Validation** (every ``validation.every`` episodes and at the end): the policy without exploration
-   on fixed fleet episodes of the tuning days, the rules once on the same episodes; each point is the
-   mean over episodes of the guided EVs' mean travel time. It neither explores nor learns, so it does
-   not change the weights (tested).
+   on fixed fleet episodes of the tuning days (taken in turn: :func:`~evcd.loops.fleet.fleet_spec`), the
+   rules once on the same episodes; each point is the mean over episodes of the guided EVs' mean travel
+   time. It neither explores nor learns, so it does not change the weights (tested).
 3. **Evaluation**: the agent (with ``validation.select_best``, the policy of its best validation:
    :mod:`evcd.loops.best_policy`) without exploration on the evaluation stream's fleet episodes (the ones
    ``scripts/evaluate.py task=fleet`` plays for the seed), each baseline on the very same episodes (same
@@ -52,7 +52,7 @@ from evcd.agents.base import Agent
 from evcd.env.fleet import FleetEnv
 from evcd.loops.best_policy import keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
-from evcd.loops.fleet import FleetEpisode, evaluate_fleet, play_fleet
+from evcd.loops.fleet import FleetEpisode, evaluate_fleet, fleet_spec, play_fleet
 from evcd.loops.fleet_figure import plot_fleet_traces
 from evcd.loops.run_files import (
     CURVE_PNG,
@@ -165,7 +165,8 @@ class FleetValidator:
         self, env: FleetEnv, settings: ValidationSettings, seed: int, rules: Mapping[str, Agent]
     ) -> None:
         self.env, self.settings, self.rules = env, settings, dict(rules)
-        self.specs = [episode_spec(seed, i, VALIDATION_STREAM) for i in range(settings.episodes)]
+        days = len(env.days)
+        self.specs = [fleet_spec(seed, i, days, VALIDATION_STREAM) for i in range(settings.episodes)]
 
     def due(self, episodes_done: int, total: int) -> bool:
         """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""

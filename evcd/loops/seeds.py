@@ -60,6 +60,22 @@ def baseline_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(AGENT_STREAM, 1)))
 
 
+def days_of_seed(days: Sequence[int], seed: int, count: int = 1) -> tuple[int, ...]:
+    """The held-out days of run ``seed`` when each seed of a sweep has its own (``eval.day_per_seed``):
+    the ``count`` consecutive days of ``days`` from index ``seed * count`` on, wrapping round (so seeds
+    ``0..len(days) // count - 1`` share no day), each at most once.
+
+    The single target takes one day per seed (its episodes spread over the day); the fleet takes one
+    per evaluation episode, since a fleet episode is a whole window of its day.
+    """
+    check_int("count", count, minimum=1)
+    if not days:
+        raise ValueError("days: at least one day is needed")
+    n = len(days)
+    block = [days[(seed * count + j) % n] for j in range(min(count, n))]
+    return tuple(dict.fromkeys(block))
+
+
 def check_seed(seed: object) -> int:
     """``seed`` if it is an integer >= 0 (``ValueError`` naming it otherwise)."""
     return check_int("seed", seed, minimum=0)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from evcd.env.transition import Transition
-from evcd.loops.fleet import play_fleet
-from evcd.loops.seeds import episode_spec
+from evcd.loops.fleet import fleet_spec, play_fleet
+from evcd.loops.seeds import VALIDATION_STREAM, days_of_seed, episode_spec
 from tests.env.handmade import ev
 
 
@@ -120,3 +120,38 @@ def test_the_shared_learner_finds_the_best_split_of_two_evs(make_small_fleet, on
     train_fleet(env, agent, 100, seed=0)  # ~800 agent steps
     learned = play_fleet(env, agent, episode_spec(0, 0))
     assert learned.measures.guided_travel * 2 == pytest.approx(best)
+
+
+def test_evaluation_and_validation_episodes_take_the_days_in_turn() -> None:
+    specs = [fleet_spec(5, i, 3, VALIDATION_STREAM) for i in range(7)]
+    assert [s.options for s in specs] == [{"day": i % 3} for i in range(7)]
+    # the seeds are the episode's own: only the day is fixed
+    plain = episode_spec(5, 4, VALIDATION_STREAM)
+    assert specs[4].reset_seed == plain.reset_seed and specs[4].index == 4
+    assert specs[4].agent_rng().integers(1 << 30) == plain.agent_rng().integers(1 << 30)
+    with pytest.raises(ValueError, match="days=0"):
+        fleet_spec(5, 0, 0)
+
+
+@pytest.mark.parametrize(
+    "seed,count,expected",
+    [
+        (0, 1, (101,)),
+        (4, 1, (105,)),  # one day per seed: days[seed mod n], as eval.day_per_seed always did
+        (6, 1, (102,)),
+        (0, 2, (101, 102)),
+        (1, 2, (103, 104)),
+        (2, 2, (105, 101)),  # a block that wraps round
+        (0, 7, (101, 102, 103, 104, 105)),  # more episodes than days: each day once
+    ],
+)
+def test_each_seed_has_its_own_block_of_days(seed: int, count: int, expected: tuple[int, ...]) -> None:
+    assert days_of_seed([101, 102, 103, 104, 105], seed, count) == expected
+
+
+def test_blocks_of_different_seeds_share_no_day_while_days_last() -> None:
+    days = list(range(106, 131))
+    blocks = [set(days_of_seed(days, s, 5)) for s in range(5)]
+    assert set().union(*blocks) == set(days) and sum(map(len, blocks)) == 25
+    with pytest.raises(ValueError, match="count=0"):
+        days_of_seed(days, 0, 0)

@@ -134,6 +134,22 @@ def test_a_rule_is_evaluated_on_the_fleet_without_training(small, tmp_path):
     assert data["baselines"]["queue_aware"]["paired"]["guided_travel"]["pairs"] == 1
 
 
+def test_each_seed_plays_its_own_evaluation_days_in_turn(small, tmp_path):
+    # day_per_seed on the fleet: seed 1 with 2 episodes takes the block days[2:4] of [1, 4, 7] (wrapping
+    # round), one day per episode, so at guided_share 1 its two episodes are two distinct episodes
+    run = tmp_path / "run"
+    proc = run_script("train.py", *small, "agent=greedy", "eval.baselines=[queue_aware]", "eval.episodes=2",
+                      "eval.day_per_seed=true", "days.evaluation=[1,4,7]", "seed=1",
+                      f"hydra.run.dir={run}")  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    data = json.loads((run / "results.json").read_text())
+    assert [e["day"] for e in data["episodes"]] == [7, 1]
+    assert data["summary"]["distinct_episodes"] == 2
+    base = list(csv.DictReader((run / "baseline_queue_aware_fleet_episodes.csv").open()))
+    assert [int(r["day"]) for r in base] == [7, 1]
+    assert "only 1 of 2" not in proc.stdout + proc.stderr
+
+
 @pytest.mark.parametrize(
     "overrides,needle",
     [
