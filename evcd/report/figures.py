@@ -200,6 +200,7 @@ def plot_validation_curves(
     colors: Mapping[str, Any] | None = None,
     gaps: Mapping[tuple[str, int], Mapping[str, Sequence[Sequence[tuple[int, float]]]]] | None = None,
     gap_rule: str = "queue_aware",
+    titles: Mapping[Any, str] | None = None,
 ) -> Path:
     """Save the periodic held-out validation: a panel per (regime, evs), a line per learner; with
     ``gaps``, a second row of panels with each seed's paired difference to ``gap_rule``.
@@ -217,6 +218,8 @@ def plot_validation_curves(
             episodes, so this is where a reader sees, seed by seed, when the learner stops closing
             in on the rule).
         gap_rule: the rule of ``gaps``, for the labels.
+        titles: key -> what its panels are (default ``"regime <regime>, <evs> EVs"`` above and
+            ``"<evs> EVs"`` below); the fleet's keys name their guided share this way.
     """
     keys = sorted(panels)
     colors = colors or agent_colors(list(dict.fromkeys(a for p in panels.values() for a in p)))
@@ -233,11 +236,12 @@ def plot_validation_curves(
                             alpha=0.2, linewidth=0)  # fmt: skip
             ax.plot(steps, mean, "o-", color=colors[agent], lw=1.8, label=f"{agent} ({len(runs)} seeds)")
             shown.append(values[np.isfinite(values)])
-        _finish_curve_axes(ax, rules.get(key, {}), shown, f"regime {key[0]}, {key[1]} EVs",
-                           "validation travel time (s, log)")  # fmt: skip
+        title = titles[key] if titles else f"regime {key[0]}, {key[1]} EVs"
+        _finish_curve_axes(ax, rules.get(key, {}), shown, title, "validation travel time (s, log)")
     if gaps:
         for ax, key in zip(grid[1], keys, strict=True):
-            _plot_gap_panel(ax, gaps.get(key, {}), colors, gap_rule, f"{key[1]} EVs")
+            where = titles[key] if titles else f"{key[1]} EVs"
+            _plot_gap_panel(ax, gaps.get(key, {}), colors, gap_rule, where)
     fig.suptitle("Held-out validation during training: the policy without exploration on the same\n"
                  "episodes of the tuning days (band: min-max over seeds)", fontsize=10)  # fmt: skip
     fig.tight_layout()

@@ -11,8 +11,9 @@ days, same guided EVs), so the dispatchers of a cell are paired by seed and epis
 with a Student-t interval across seeds (seeds are the independent draws of days and guided EVs), for
 the guided EVs and for ALL EVs charging in the window; and the paired differences of
 :data:`FLEET_PAIRS`: per seed the mean over episodes of A - B, then the mean over seeds with its
-t interval. Files: ``fleet_results.md``, ``fleet_results.csv`` (one row per job) and
-``fleet_results_bars.png``.
+t interval. Files: ``fleet_results.md``, ``fleet_results.csv`` (one row per job),
+``fleet_results_bars.png`` and, where learners validated, ``fleet_validation_curves.png`` (the periodic
+held-out validation per cell, and each seed paired with ``queue_aware`` on its own validation episodes).
 """
 
 from __future__ import annotations
@@ -29,11 +30,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from evcd.report.figures import agent_colors, plot_results_bars
+from evcd.report.figures import agent_colors, plot_results_bars, plot_validation_curves
 from evcd.report.markdown import format_stat, markdown_table, num
 from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.sweep import Collection, ResultsError, collect
+from evcd.report.table import GAP_RULE, validation_gaps, validation_points, validation_rule_means
 from evcd.utils.atomic import atomic_write_text
 
 log = logging.getLogger(__name__)
@@ -41,6 +43,7 @@ log = logging.getLogger(__name__)
 MD_NAME = "fleet_results.md"
 CSV_NAME = "fleet_results.csv"
 BARS_PNG = "fleet_results_bars.png"
+VALIDATION_PNG = "fleet_validation_curves.png"
 #: Dispatchers in the order of the table's columns (others follow alphabetically).
 FLEET_AGENT_ORDER = ("random", "greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
 #: The paired comparisons the table reports: (A, B) for A - B.
@@ -81,6 +84,10 @@ class FleetJob:
     job_dir: Path
     #: per evaluation fleet episode: (episode, day, guided EVs' mean, all EVs' mean), for the pairs
     per_episode: tuple[tuple[int, int, float, float], ...] = dataclasses.field(default=(), repr=False)
+    #: the periodic held-out validation: (training episodes done, guided EVs' mean) per point
+    validation: tuple[tuple[int, float], ...] = dataclasses.field(default=(), repr=False)
+    #: the rules' means on the same validation episodes, by rule
+    validation_rules: tuple[tuple[str, float], ...] = dataclasses.field(default=(), repr=False)
 
     @property
     def key(self) -> tuple[str, int, float, str, int]:
@@ -104,6 +111,7 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
     if not isinstance(config, Mapping):
         raise KeyError("config")
     episodes = data.get("episodes") or []
+    validation = data.get("validation") or {}
     per_episode = tuple(
         (int(e["episode"]), int(e["day"]), _float(e["guided_travel"]), _float(e["all_travel"]))
         for e in episodes
@@ -127,6 +135,10 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
         eval_days=tuple(sorted({d for _, d, _, _ in per_episode})),
         job_dir=job_dir,
         per_episode=per_episode,
+        validation=tuple(
+            (int(p["episodes_done"]), _float(p.get("mean"))) for p in validation.get("points", ())
+        ),
+        validation_rules=tuple((str(k), _float(v)) for k, v in (validation.get("rule_means") or {}).items()),
     )
 
 
@@ -333,6 +345,20 @@ def make_fleet_table(
     title = "Fleet: guided EVs' mean travel time, mean over seeds, 95% interval across seeds (Student t)"
     paths.append(plot_results_bars(stats, out / BARS_PNG, colors=agent_colors(agents), title=title,
                                    xlabel="guided share"))  # fmt: skip
+    validation = validation_points(jobs, _panel)
+    if validation:
+        titles = {key: f"guided share {key[2]:g}, {key[1]} EVs" for key in validation}
+        gaps = validation_gaps(jobs, GAP_RULE, _panel)
+        rules = validation_rule_means(jobs, _panel)
+        png = out / VALIDATION_PNG
+        paths.append(
+            plot_validation_curves(validation, rules, png, agent_colors(agents), gaps, GAP_RULE, titles)
+        )
     for path in paths:
         log.info("wrote %s", path)
     return FleetTableOutputs(markdown, tuple(paths), collection)
+
+
+def _panel(job: FleetJob) -> Cell:
+    """The validation figure's panel of a job: its cell (regime, EV count, guided share)."""
+    return job.regime, job.evs, job.guided_share

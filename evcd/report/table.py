@@ -25,7 +25,7 @@ import json
 import logging
 import math
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -312,39 +312,46 @@ def training_rows(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, 
 
 
 Points = list[tuple[int, float]]  # (training episodes done, validation mean travel time)
+#: What a validation panel groups: a key of two fields of a job (``(regime, evs)`` by default).
+PanelKey = Callable[[Any], tuple[Any, ...]]
 
 
-def validation_points(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, list[Points]]]:
-    """(regime, evs) -> agent -> each seed's periodic validation points, for the jobs that validated."""
-    out: dict[tuple[str, int], dict[str, list[Points]]] = {}
+def _regime_evs(job: Any) -> tuple[str, int]:
+    return job.regime, job.evs
+
+
+def validation_points(jobs: Sequence[Any], key: PanelKey = _regime_evs) -> dict[Any, dict[str, list[Points]]]:
+    """Panel key (``(regime, evs)``) -> agent -> each seed's periodic validation points, for the jobs
+    that validated (any job with ``agent``, ``validation`` and ``validation_rules``: the fleet's too)."""
+    out: dict[Any, dict[str, list[Points]]] = {}
     for job in jobs:
         if job.validation:
-            out.setdefault((job.regime, job.evs), {}).setdefault(job.agent, []).append(list(job.validation))
+            out.setdefault(key(job), {}).setdefault(job.agent, []).append(list(job.validation))
     return dict(sorted(out.items()))
 
 
 def validation_gaps(
-    jobs: Sequence[JobResult], rule: str = GAP_RULE
-) -> dict[tuple[str, int], dict[str, list[Points]]]:
-    """(regime, evs) -> agent -> each seed's validation points minus ``rule``'s validation mean in the
+    jobs: Sequence[Any], rule: str = GAP_RULE, key: PanelKey = _regime_evs
+) -> dict[Any, dict[str, list[Points]]]:
+    """Panel key -> agent -> each seed's validation points minus ``rule``'s validation mean in the
     same job (the same episodes: a paired difference per point; negative: the learner is faster).
     Jobs whose validation did not run ``rule`` are left out."""
-    out: dict[tuple[str, int], dict[str, list[Points]]] = {}
+    out: dict[Any, dict[str, list[Points]]] = {}
     for job in jobs:
         base = dict(job.validation_rules).get(rule)
         if job.validation and base is not None:
             gaps = [(episodes, mean - base) for episodes, mean in job.validation]
-            out.setdefault((job.regime, job.evs), {}).setdefault(job.agent, []).append(gaps)
+            out.setdefault(key(job), {}).setdefault(job.agent, []).append(gaps)
     return dict(sorted(out.items()))
 
 
-def validation_rule_means(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, float]]:
-    """(regime, evs) -> rule -> its validation mean over the seeds of the jobs that validated."""
-    values: dict[tuple[str, int], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+def validation_rule_means(jobs: Sequence[Any], key: PanelKey = _regime_evs) -> dict[Any, dict[str, float]]:
+    """Panel key -> rule -> its validation mean over the seeds of the jobs that validated."""
+    values: dict[Any, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     for job in jobs:
         for rule, mean in job.validation_rules:
-            values[job.regime, job.evs][rule].append(mean)
-    return {key: {rule: float(np.mean(v)) for rule, v in rules.items()} for key, rules in values.items()}
+            values[key(job)][rule].append(mean)
+    return {k: {rule: float(np.mean(v)) for rule, v in rules.items()} for k, rules in values.items()}
 
 
 def make_table(

@@ -15,8 +15,17 @@ import matplotlib.image
 import pytest
 import yaml
 
-from evcd.report.fleet_table import BARS_PNG, CSV_NAME, MD_NAME, fleet_job, make_fleet_table, paired_fleet
+from evcd.report.fleet_table import (
+    BARS_PNG,
+    CSV_NAME,
+    MD_NAME,
+    VALIDATION_PNG,
+    fleet_job,
+    make_fleet_table,
+    paired_fleet,
+)
 from evcd.report.sweep import IncompleteSweepError, ResultsError, collect
+from evcd.report.table import validation_gaps, validation_points
 from tests.conftest import run_script
 from tests.report.test_make_table import results_json as single_results_json
 
@@ -190,3 +199,30 @@ def test_make_table_fleet_on_the_command_line(tmp_path) -> None:
     assert (tmp_path / "out" / BARS_PNG).exists()
     proc = run_script("make_table.py", str(sweep), "--out", str(tmp_path / "single"), timeout=300)
     assert proc.returncode == 1 and "make_table.py --fleet" in proc.stderr
+
+
+def test_validation_curves_per_cell_pair_each_seed_with_queue_aware(tmp_path) -> None:
+    sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware", "dqn"))
+    for job in sweep.glob("*_dqn_*"):
+        data = json.loads((job / "results.json").read_text())
+        seed, share = data["seed"], data["config"]["fleet"]["guided_share"]
+        data["validation"] = {
+            "points": [{"episodes_done": 20, "transitions": 900, "mean": 500.0 + seed},
+                       {"episodes_done": 40, "transitions": 1800, "mean": 400.0 * share + seed}],
+            "rules": {"queue_aware": [450.0], "central": [380.0]},
+            "rule_means": {"queue_aware": 450.0 + 10 * seed, "central": 380.0},
+        }  # fmt: skip
+        (job / "results.json").write_text(json.dumps(data))
+    out = make_fleet_table([sweep], tmp_path / "out")
+    jobs = [j for j in out.collection.jobs if j.agent == "dqn"]
+    panel = ("fleet", 400, 0.5)
+    points = validation_points(jobs, lambda j: (j.regime, j.evs, j.guided_share))
+    assert sorted(points) == [panel, ("fleet", 400, 1.0)]
+    assert sorted(points[panel]["dqn"]) == [[(20, 500.0 + s), (40, 200.0 + s)] for s in SEEDS]
+    gaps = validation_gaps(jobs, "queue_aware", lambda j: (j.regime, j.evs, j.guided_share))
+    # paired per seed with queue_aware on its own validation episodes
+    assert sorted(gaps[panel]["dqn"]) == sorted([(20, 50.0 - 9 * s), (40, -250.0 - 9 * s)] for s in SEEDS)
+    assert matplotlib.image.imread(tmp_path / "out" / VALIDATION_PNG).shape[0] > 600  # two rows of panels
+    # no learner validated: no figure
+    plain = write_fleet_sweep(tmp_path / "plain", agents=("queue_aware",))
+    assert VALIDATION_PNG not in {p.name for p in make_fleet_table([plain], tmp_path / "o2").paths}
