@@ -312,7 +312,7 @@ def training_rows(jobs: Sequence[JobResult]) -> dict[tuple[str, int], dict[str, 
 
 
 Points = list[tuple[int, float]]  # (training episodes done, validation mean travel time)
-#: What a validation panel groups: a key of two fields of a job (``(regime, evs)`` by default).
+#: What a validation panel groups jobs by: a tuple of their fields (``(regime, evs)`` by default).
 PanelKey = Callable[[Any], tuple[Any, ...]]
 
 
