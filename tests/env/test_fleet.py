@@ -120,6 +120,27 @@ def test_two_guided_evs_sent_to_a_one_point_station_charge_one_after_the_other(m
         assert info["switches"] == 1
 
 
+def test_an_ev_sent_elsewhere_while_crossing_a_junction_still_charges_there(make_fleet) -> None:
+    """At a tick, every guided EV found on a junction (an internal edge) is sent to another station:
+    each of them must start charging there. (SUMO's rerouteParkingArea from inside a junction could
+    leave the new car park off the route: the EV then drove to its destination uncharged and
+    'vanished'.)"""
+    env = make_fleet(guided_share=1.0, decision_interval=5.0)
+    sent: dict[str, int] = {}
+
+    def policy(agent: str, obs: np.ndarray, info: dict) -> int:
+        if agent not in sent and env.simulation.api.vehicle.getRoadID(agent).startswith(":"):
+            sent[agent] = (int(info["station"]) + 1) % len(env.stations)
+        return sent.get(agent, int(info["station"]))
+
+    out = play(env, 0, policy)
+    assert len(sent) >= 3, sent  # the case happened (the seed and grid are fixed)
+    for agent, station in sent.items():
+        assert out["infos"][agent]["reason"] == "charging", out["infos"][agent]
+        assert out["infos"][agent]["station"] == station
+    assert all(o["reason"] == "charging" for o in out["outcomes"]), out["outcomes"]
+
+
 def test_agents_appear_at_the_tick_after_insertion_and_leave_at_the_tick_after_charging(
     make_small_fleet,
 ) -> None:
