@@ -161,7 +161,7 @@ def test_each_seed_plays_its_own_evaluation_days_in_turn(small, tmp_path):
         (["fleet.guided_share=0"], "guided_share=0"),
         (["fleet.guided_share=1.5"], "guided_share=1.5"),
         (["env.protocol=paper"], "env.protocol=paper is for the single target"),
-        (["days.tuning=[0]"], "train.validation.days share [0]"),
+        (["train.validation.days=[0]"], "train.validation.days share [0]"),
         (["agent.checkpoint=somewhere"], "agent.checkpoint is for scripts/evaluate.py"),
         (["env.departure_window=[3600,3660]"], "nothing to guide"),
         (
