@@ -3,7 +3,7 @@ dispatchers, guided shares and seeds, read into one table.
 
     python scripts/train.py -m experiment=fleet seed=0,1,2,3,4 fleet.guided_share=0.25,0.5,1.0 \\
         agent=dueling_ddqn,dqn,central,reservation,queue_aware,greedy eval.baselines=[]
-    python scripts/make_table.py --fleet outputs/train_multirun/<time>
+    python scripts/make_table.py --fleet outputs/fleet/<time>   (experiment=fleet sweeps there)
 
 Every job of a seed plays the same evaluation fleet episodes (the evaluation stream of the seed: same
 days, same guided EVs), so the dispatchers of a cell are paired by seed and episode. Per cell
