@@ -184,7 +184,7 @@ def evaluate_fleet(
             bar.update(1)
     rng = bootstrap_rng(seed)
     summary: dict[str, Any] = {"episodes": episodes, "seed": seed}
-    for key in ("guided_travel", "all_travel", "queue_wait", "herding"):
+    for key in ("guided_travel", "all_travel", "queue_wait", "herding", "guided_travel_censored"):
         values = np.array([getattr(ep.measures, key) for ep in played], dtype=np.float64)
         finite = values[np.isfinite(values)]
         summary[key] = float(finite.mean()) if finite.size else math.nan

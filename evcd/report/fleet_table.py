@@ -82,6 +82,8 @@ class FleetJob:
     train_wall_s: float
     eval_days: tuple[int, ...]
     job_dir: Path
+    #: every guided EV, truncated ones at their truncation (NaN for runs made before the measure)
+    guided_travel_censored: float = math.nan
     #: per evaluation fleet episode: (episode, day, guided EVs' mean, all EVs' mean), for the pairs
     per_episode: tuple[tuple[int, int, float, float], ...] = dataclasses.field(default=(), repr=False)
     #: the periodic held-out validation: (training episodes done, guided EVs' mean) per point
@@ -134,6 +136,7 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
         train_wall_s=_float(training.get("wall_s", 0.0)),
         eval_days=tuple(sorted({d for _, d, _, _ in per_episode})),
         job_dir=job_dir,
+        guided_travel_censored=_float(summary.get("guided_travel_censored")),
         per_episode=per_episode,
         validation=tuple(
             (int(p["episodes_done"]), _float(p.get("mean"))) for p in validation.get("points", ())
@@ -182,6 +185,11 @@ def paired_fleet(jobs: Sequence[FleetJob], cell: Cell, a: str, b: str, measure: 
 def _nanmean(values: Sequence[float]) -> float:
     finite = [v for v in values if math.isfinite(v)]
     return float(np.mean(finite)) if finite else math.nan
+
+
+def _censored(values: Sequence[float]) -> str:
+    """The mean over seeds of the censored travel time, ``—`` unless every job measured it."""
+    return num(float(np.mean(values))) if values and all(math.isfinite(v) for v in values) else "—"
 
 
 def _cell_label(cell: Cell, regimes: int) -> list[str]:
@@ -262,17 +270,30 @@ def fleet_markdown(collection: Collection) -> str:
                 *_cell_label(c, regimes), a, str(len(group)),
                 f"{sum(j.truncated for j in group)} of {sum(j.guided for j in group)}",
                 num(_nanmean([j.herding for j in group]), 2), num(_nanmean([j.queue_wait for j in group])),
+                _censored([j.guided_travel_censored for j in group]),
                 f"{trained} / {steps} / {num(minutes)}" if trained else "—",
             ])  # fmt: skip
     lines += [
         "### Per dispatcher",
         "",
         "Over the seeds of each cell: guided EVs truncated, the mean herding (largest share of the guided "
-        "EVs of a 10-minute bin sent to one station) and queue wait (s), and for learners the training "
-        "episodes / agent steps / minutes, summed over seeds.",
+        "EVs of a 10-minute bin sent to one station) and queue wait (s), the guided EVs' mean travel time "
+        "with the truncated ones counted at their truncation (s, a lower bound; mean over seeds, — for "
+        "runs made before this measure), and for learners the training episodes / agent steps / "
+        "minutes, summed over seeds.",
         "",
         *markdown_table(
-            [*head, "dispatcher", "seeds", "truncated", "herding", "queue wait", "training"], rows
+            [
+                *head,
+                "dispatcher",
+                "seeds",
+                "truncated",
+                "herding",
+                "queue wait",
+                "with truncated",
+                "training",
+            ],
+            rows,
         ),
         "",
     ]

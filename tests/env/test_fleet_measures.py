@@ -32,6 +32,7 @@ def test_guided_and_all_travel_times_waits_and_truncations() -> None:
     m = measure(outcomes, candidates, records, window_start=900.0)
     assert (m.guided, m.guided_charged, m.truncated) == (3, 2, 1)
     assert m.guided_travel == pytest.approx((100.0 + 490.0) / 2)
+    assert m.guided_travel_censored == pytest.approx((100.0 + 490.0 + 600.0) / 3)  # g3 at its truncation
     assert m.queue_wait == pytest.approx(150.0 / 3)
     assert m.all_evs == 4 and m.all_unfinished == 1
     assert m.all_travel == pytest.approx((100.0 + 490.0 + 300.0) / 3)  # g2 counts from its charge start

@@ -74,6 +74,7 @@ def fleet_results(agent: str, share: float, seed: int) -> dict:
             "herding": 0.5,
             "guided": 20,
             "truncated": 1 if agent == "reservation" else 0,
+            "guided_travel_censored": mean + (50.0 if agent == "reservation" else 0.0),
             "all_unfinished": 0,
             "transitions": 200,
             "mean_wall_s": 20.0,
@@ -148,6 +149,7 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     )
     detail = row(md, "### Per dispatcher", ["400", "0.5", "reservation"])
     assert detail["truncated"] == "3 of 60" and detail["training"] == "—"
+    assert detail["with truncated"] == f"{BASE['reservation', 0.5] + 50.0:.1f}"  # SPREAD and OFFSETS: mean 0
     assert row(md, "### Per dispatcher", ["400", "0.5", "dqn"])["training"] == "180 / 27000 / 75.0"
     # the csv: one row per job; the figure is a real PNG
     rows = list(csv.DictReader(io.StringIO((tmp_path / "out" / CSV_NAME).read_text())))
@@ -156,6 +158,17 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     assert matplotlib.image.imread(tmp_path / "out" / BARS_PNG).shape[0] > 300
     with pytest.raises(FileExistsError, match="refusing to overwrite"):
         make_fleet_table([sweep], tmp_path / "out")
+
+
+def test_runs_made_before_the_censored_measure_leave_its_cell_empty(tmp_path) -> None:
+    sweep = write_fleet_sweep(tmp_path / "sweep")
+    job = next(sweep.glob("*_reservation_share0.5_seed1")) / "results.json"
+    data = json.loads(job.read_text())
+    del data["summary"]["guided_travel_censored"]
+    job.write_text(json.dumps(data))
+    md = make_fleet_table([sweep], tmp_path / "out").markdown
+    assert row(md, "### Per dispatcher", ["400", "0.5", "reservation"])["with truncated"] == "—"
+    assert row(md, "### Per dispatcher", ["400", "1", "reservation"])["with truncated"] != "—"
 
 
 def test_a_nan_episode_is_left_out_of_its_pairs(tmp_path) -> None:

@@ -2,6 +2,9 @@
 
 - ``guided_travel``: mean travel time (scheduled departure to charge start, s) of the guided EVs that
   started charging; ``truncated``: guided EVs that did not (any truncation, ``not_inserted`` too).
+- ``guided_travel_censored``: the mean over EVERY guided EV, a truncated one counted at the time it
+  was truncated (from its departure): a lower bound of what the guided EVs spent, which a dispatcher
+  cannot improve by losing its slowest EVs (``guided_travel`` leaves them out).
 - ``all_travel``: the same over ALL the charging EVs departing in the window, guided or not: the
   system's view (a centre that helps its users by pushing others into queues shows it here). Only the
   EVs that started charging before the episode ended count; ``all_unfinished`` says how many had not.
@@ -44,6 +47,7 @@ class FleetMeasures:
     all_travel: float
     herding: float
     switches: float = 0.0
+    guided_travel_censored: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (for JSON and CSV)."""
@@ -90,6 +94,7 @@ def measure(
         all_travel=_mean(travel),
         herding=max(shares) if shares else math.nan,
         switches=_mean([float(o.get("switches", 0)) for o in outcomes]) if outcomes else 0.0,
+        guided_travel_censored=_mean([float(o["travel_time"]) for o in outcomes if "travel_time" in o]),
     )
 
 
