@@ -56,6 +56,8 @@ FLEET_PAIRS: tuple[tuple[str, str], ...] = (
     ("dueling_ddqn", "central"),
     ("dueling_ddqn", "dqn"),
 )
+#: The columns of the per-dispatcher table, after the cell's.
+DETAIL_COLUMNS = ("dispatcher", "seeds", "truncated", "herding", "queue wait", "with truncated", "training")
 #: The travel times of the table: the guided EVs' and everybody's charging in the window.
 MEASURES: dict[str, str] = {"guided_travel": "the guided EVs", "all_travel": "all EVs charging in the window"}
 
@@ -282,19 +284,7 @@ def fleet_markdown(collection: Collection) -> str:
         "runs made before this measure), and for learners the training episodes / agent steps / "
         "minutes, summed over seeds.",
         "",
-        *markdown_table(
-            [
-                *head,
-                "dispatcher",
-                "seeds",
-                "truncated",
-                "herding",
-                "queue wait",
-                "with truncated",
-                "training",
-            ],
-            rows,
-        ),
+        *markdown_table([*head, *DETAIL_COLUMNS], rows),
         "",
     ]
     return "\n".join(lines)

@@ -139,8 +139,10 @@ class GuidedEV:
             self.switches += 1
         self.station = index
         vid, veh = self.vehicle, api.vehicle
-        # the edge it is on (or, on a junction, the one it is leaving) and the rest of its route
-        before = veh.getRoute(vid)[veh.getRouteIndex(vid) :]
+        route = self.obs.routes[index] if self.obs is not None else ()
+        on_junction = not route or route[0].startswith(":")
+        # on a junction: the edge it is leaving and the rest of its route, read before SUMO changes it
+        before = veh.getRoute(vid)[veh.getRouteIndex(vid) :] if on_junction else ()
         if controller.status(vid) is not None:  # waiting in another car park: leave its queue
             controller.release(api, vid, time)
         else:
@@ -154,8 +156,7 @@ class GuidedEV:
             except SUMO_ERRORS as exc:
                 log.debug("t=%s %s: rerouteParkingArea to %s refused (%s)", time, vid, station.id, exc)
         onward = _find(api, station.edge, self.destination)
-        route = self.obs.routes[index] if self.obs is not None else ()
-        if not route or route[0].startswith(":"):  # on a junction: through the edge it is entering
+        if on_junction:  # through the edge it is entering
             route = _through_junction(api, before, station.edge)
         veh.setRoute(vid, [*route, *onward[1:]] if onward else list(route))
         park_at(api, vid, station, observer, self.road, self.pos, time, onward)
