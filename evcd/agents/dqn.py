@@ -49,6 +49,7 @@ from evcd.agents.base import (
 )
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
 from evcd.agents.dqn_state import STATE_FORMAT, check_policy_state
+from evcd.agents.in_turn import counted_at, decide_in_turn
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
 from evcd.env.observation import unit_divisors
@@ -72,6 +73,11 @@ class DQNEpisode(EpisodeState):
     random_station: int | None = None
     #: n-step returns: this episode's transitions not stored yet (the last n - 1 at most)
     pending: deque[Transition] = field(default_factory=deque)
+    #: ``in_turn`` (the fleet): the station it was sent to at its last decision, the observation it
+    #: decided on, and its last transition, stored once the observation of its next decision is known
+    station: int | None = None
+    seen: np.ndarray | None = None
+    held: Transition | None = None
 
 
 class DQNAgent(Agent):
@@ -123,8 +129,17 @@ class DQNAgent(Agent):
         self.dueling = check_bool("dueling", dueling)
         self.blocks = check_blocks(obs_blocks, "obs_blocks")
         self.obs_dim = self.blocks * self.n_stations
+        if self.config.in_turn and self.blocks != 4:
+            raise ValueError(
+                f"in_turn=True with obs_blocks={self.blocks}: in_turn is the fleet's (task=fleet, "
+                "[D, N, Z, H]: the EVs of one tick decide one after the other); the single "
+                "environment has one EV (in_turn=false)"
+            )
         self.normalized = check_bool("normalized", normalized)
         self._divisors = self._observation_divisors(points)
+        m = self.n_stations
+        #: one vehicle in the observation's Z and H units (in_turn's corrections)
+        self._vehicle = 1.0 / self._divisors[-m:] if self.normalized else np.ones(m)
         #: physical observation (m, vehicles) -> network input; saved with the networks
         self.input_scale = np.ones(self.obs_dim, np.float32) if points is None else 1.0 / self._divisors
         self._set_input_scale(self.input_scale)
@@ -182,8 +197,10 @@ class DQNAgent(Agent):
 
     def __repr__(self) -> str:
         c = self.config
+        turn = ", in turn" if c.in_turn else ""
         return (f"DQNAgent({self.name}, {c.network} {list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
-                f"buffer={c.buffer_size}, alpha={c.alpha:g}, target_update={c.target_update})")  # fmt: skip
+                f"buffer={c.buffer_size}, alpha={c.alpha:g}, "
+                f"target_update={c.target_update}{turn})")  # fmt: skip
 
     # ------------------------------------------------------------------ acting
     @property
@@ -225,10 +242,44 @@ class DQNAgent(Agent):
         return DQNEpisode(rng)
 
     def decide(self, obs: np.ndarray, episodes: Sequence[DQNEpisode], explore: bool = False) -> np.ndarray:
-        """``argmax Q`` of each observation (one forward pass), epsilon-greedy per episode if ``explore``."""
+        """``argmax Q`` of each observation (one forward pass), epsilon-greedy per episode if ``explore``;
+        with ``in_turn``, the rows one after the other (:meth:`decide_in_turn`)."""
+        if self.config.in_turn:
+            return self.decide_in_turn(obs, episodes, explore)
         greedy = self.q_values(obs).argmax(axis=-1)
         pairs = zip(greedy, episodes, strict=True)
         return np.array([self._choose(int(g), episode, explore) for g, episode in pairs], dtype=np.int64)
+
+    def decide_in_turn(
+        self, obs: np.ndarray, episodes: Sequence[DQNEpisode], explore: bool = False
+    ) -> np.ndarray:
+        """The fleet EVs of one tick (rows of ``obs``, ``(k, 4m)``) in turn: in order of their best
+        Q-value on the tick's observations (the soonest expected charge first; ties to the lower row),
+        each deciding (epsilon-greedy if ``explore``) on its observation corrected for the stations
+        chosen before it (:func:`~evcd.agents.in_turn.decide_in_turn`). Each episode keeps its
+        station and the observation it decided on; an EV's transition held since its previous
+        decision is stored now, its next observation being the one it decides on here (what its
+        next action was chosen on)."""
+        batch = np.asarray(obs, dtype=np.float32)
+        if batch.ndim != 2 or len(batch) != len(episodes):
+            raise ValueError(
+                f"observations of shape {batch.shape} for {len(episodes)} episodes: one row each"
+            )
+        order = np.argsort(-self.q_values(batch).max(axis=1), kind="stable")
+        d = batch[:, : self.n_stations]
+        counted = counted_at(d, episodes)
+        waiting = (d == 0.0).any(axis=1)
+
+        def choose(j: int, row: np.ndarray) -> int:
+            return self._choose(int(self.q_values(row).argmax()), episodes[j], explore)
+
+        stations, seen = decide_in_turn(batch, counted, waiting, self._vehicle, order, choose)
+        for episode, s, row in zip(episodes, stations, seen, strict=True):
+            episode.station, episode.seen = int(s), row
+            if episode.held is not None:
+                self._push(episode.held._replace(next_obs=row), episode)
+                episode.held = None
+        return stations
 
     def _choose(self, greedy: int, episode: DQNEpisode, explore: bool) -> int:
         """The action given the greedy one: the exploration draws, from the episode's generator."""
@@ -252,24 +303,39 @@ class DQNAgent(Agent):
         With ``n_step`` > 1 a transition is stored once the ``n - 1`` after it are known (or its
         episode ended): its reward becomes the discounted sum of the (up to) ``n`` rewards, its
         next observation the one ``n`` steps on, and its bootstrap is discounted by ``gamma ** n``.
+        With ``in_turn`` the transition's observation is the one the EV decided on, and its next
+        observation the one it decides on at its next tick (:meth:`decide_in_turn` stores it then).
         """
         c = self.config
-        if c.n_step == 1:
-            self._store((transition,))
+        ep = self.episode if episode is None else episode
+        if c.in_turn and ep.seen is not None:  # decided in turn: learn from what it decided on
+            transition = transition._replace(obs=ep.seen)
+            ep.seen = None
+            if transition.terminated or transition.truncated:
+                self._push(transition, ep)
+            else:  # its next observation is the one it will decide on (decide_in_turn stores it)
+                ep.held = transition
         else:
-            pending = (self.episode if episode is None else episode).pending
-            pending.append(transition)
-            if len(pending) == c.n_step:
-                self._store(pending)
-                pending.popleft()
-            if transition.terminated or transition.truncated:  # the episode ended: store what is left
-                while pending:
-                    self._store(pending)
-                    pending.popleft()
+            self._push(transition, ep)
         self.steps += 1
         if self.steps >= max(c.learning_starts, 1) and self.steps % c.train_freq == 0 and len(self.replay):
             for _ in range(c.gradient_steps):
                 self.learn()
+
+    def _push(self, transition: Transition, episode: DQNEpisode) -> None:
+        """Into the replay, through ``episode``'s n-step window."""
+        if self.config.n_step == 1:
+            self._store((transition,))
+            return
+        pending = episode.pending
+        pending.append(transition)
+        if len(pending) == self.config.n_step:
+            self._store(pending)
+            pending.popleft()
+        if transition.terminated or transition.truncated:  # the episode ended: store what is left
+            while pending:
+                self._store(pending)
+                pending.popleft()
 
     def _store(self, window: Sequence[Transition]) -> None:
         """Store the first transition of ``window`` with the rewards of the whole window."""

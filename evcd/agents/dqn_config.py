@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 from evcd.agents.networks import NETWORKS, check_hidden
-from evcd.utils.validation import check_choice, check_int, check_real
+from evcd.utils.validation import check_bool, check_choice, check_int, check_real
 
 LOSSES = ("mse", "huber")
 EXPLORATIONS = ("slot", "episode")
@@ -53,6 +53,10 @@ class DQNConfig:
         max_grad_norm: clip the gradient's global norm to this (``None``: no clipping).
         reward_scale: rewards are multiplied by this before learning (the paper's reward reaches
             tens; a scale keeps the regression targets near 1).
+        in_turn: the fleet only (``[D, N, Z, H]``): the EVs of one tick decide one after the other,
+            in order of their best Q-value (the soonest expected charge first), each on its
+            observation corrected for the stations chosen before it (:mod:`evcd.agents.in_turn`);
+            ``False``: side by side on the tick's observations.
     """
 
     hidden: tuple[int, ...] = (512, 256)
@@ -80,6 +84,7 @@ class DQNConfig:
     loss: str = "mse"
     max_grad_norm: float | None = 10.0
     reward_scale: float = 1.0
+    in_turn: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", check_hidden(self.hidden))
@@ -98,6 +103,7 @@ class DQNConfig:
         check_choice("network", self.network, NETWORKS)
         check_choice("exploration", self.exploration, EXPLORATIONS)
         check_choice("loss", self.loss, LOSSES)
+        check_bool("in_turn", self.in_turn)
         if self.lr_end is not None:
             check_real("lr_end", self.lr_end, low=0.0, low_open=True)
         if self.max_grad_norm is not None:

@@ -57,7 +57,8 @@ def check_policy_state(
 
 def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
     """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of the agent saved in a
-    checkpoint, so that a policy can be rebuilt to load it.
+    checkpoint and how it decides a fleet tick (``in_turn``), so that a policy can be rebuilt to load
+    it and act as it was trained.
 
     Raises:
         CheckpointError: the file is not a DQN checkpoint (or is damaged).
@@ -72,6 +73,7 @@ def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
         "network": str(saved["network"]),
         "double": bool(saved["double"]),
         "dueling": bool(saved["dueling"]),
+        "in_turn": bool(saved.get("in_turn", False)),
     }
 
 

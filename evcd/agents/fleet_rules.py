@@ -27,6 +27,7 @@ import numpy as np
 
 from evcd.agents.base import EpisodeState
 from evcd.agents.heuristics import QueueAwareAgent
+from evcd.agents.in_turn import counted_at
 from evcd.utils.validation import check_real
 
 
@@ -40,15 +41,6 @@ class FleetRuleEpisode(EpisodeState):
 
 #: The former name of :class:`FleetRuleEpisode` (the central rule's episode state).
 CentralEpisode = FleetRuleEpisode
-
-
-def counted_at(d: np.ndarray, episodes: Sequence[FleetRuleEpisode]) -> np.ndarray:
-    """Per EV (rows of ``d``, physical ``D``), the station it is at or heading to as far as the rule
-    knows (-1: unknown): where it waits (``D == 0``: in that station's ``Z``), else where the rule last
-    sent it."""
-    waiting = d == 0.0
-    last = np.array([-1 if e.station is None else e.station for e in episodes], dtype=np.int64)
-    return np.where(waiting.any(axis=1), np.argmax(waiting, axis=1), last)
 
 
 class ReservationAgent(QueueAwareAgent):

@@ -1095,7 +1095,13 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
     assert _equal(_params(built.online), _params(trained.online))
     config = checkpoint_agent_config(run_dir)
     dueling = name == "dueling_ddqn"
-    assert config == {"hidden": (16, 16), "network": "mlp", "double": dueling, "dueling": dueling}
+    assert config == {
+        "hidden": (16, 16),
+        "network": "mlp",
+        "double": dueling,
+        "dueling": dueling,
+        "in_turn": False,
+    }
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")
     assert checkpoint_agent_config(tmp_path / "bare") == config

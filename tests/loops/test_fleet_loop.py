@@ -98,7 +98,10 @@ class Assign:
         return None
 
 
-def test_the_shared_learner_finds_the_best_split_of_two_evs(make_small_fleet, one_torch_thread) -> None:
+@pytest.mark.parametrize("in_turn", [False, True])
+def test_the_shared_learner_finds_the_best_split_of_two_evs(
+    make_small_fleet, one_torch_thread, in_turn: bool
+) -> None:
     from evcd.agents import make_agent_for_env
     from evcd.agents.dqn_config import DQNConfig
     from evcd.loops.fleet import train_fleet
@@ -114,10 +117,13 @@ def test_the_shared_learner_finds_the_best_split_of_two_evs(make_small_fleet, on
     greedy = play_fleet(env, make_agent_for_env("greedy", env, np.random.default_rng(0)), episode_spec(0, 0))
     assert greedy.measures.guided_travel * 2 == pytest.approx(totals[(1, 1)])  # nearest by road: it herds
     config = DQNConfig(hidden=(32, 32), lr=3e-3, batch_size=32, gamma=0.9, learning_starts=50,
-                       target_update=100, exploration_steps=600, reward_scale=10.0, loss="huber")  # fmt: skip
+                       target_update=100, exploration_steps=600, reward_scale=10.0, loss="huber",
+                       in_turn=in_turn)  # fmt: skip
     agent = make_agent_for_env("dueling_ddqn", env, np.random.default_rng(0), config=config)
     assert agent.obs_dim == 8
-    train_fleet(env, agent, 100, seed=0)  # ~800 agent steps
+    played = train_fleet(env, agent, 100, seed=0)  # ~800 agent steps
+    # every agent step reached the replay (in turn: each one at the EV's next decision or its end)
+    assert len(agent.replay) == agent.steps == sum(ep.transitions for ep in played)
     learned = play_fleet(env, agent, episode_spec(0, 0))
     assert learned.measures.guided_travel * 2 == pytest.approx(best)
 

@@ -123,6 +123,26 @@ def test_train_a_fleet_then_evaluate_its_policy(small, script_overrides, tmp_pat
     assert proc.returncode == 2 and "that run is complete" in proc.stdout + proc.stderr
 
 
+def test_a_policy_trained_in_turn_is_evaluated_in_turn(small, script_overrides, tmp_path):
+    run = tmp_path / "run"
+    proc = run_script("train.py", *small, "agent=dqn", "learner.in_turn=true", "eval.baselines=[]",
+                      f"hydra.run.dir={run}")  # fmt: skip
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-3000:]
+    assert "target_update=20, in turn)" in log
+    data = json.loads((run / "results.json").read_text())
+    out = tmp_path / "eval"
+    proc = run_script("evaluate.py", *script_overrides, "task=fleet", "evs=300",
+                      "scenario.demand.charging_share=0.6", "env.departure_window=[21600,25200]",
+                      "env.demand_seeds=[1]", "episodes=1", "agent=dqn", f"agent.checkpoint={run}",
+                      f"hydra.run.dir={out}")  # fmt: skip
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-3000:]
+    assert "in turn)" in log  # the checkpoint says how its policy decides a tick (not learner.in_turn)
+    again = json.loads((out / "results.json").read_text())
+    assert again["summary"]["guided_travel"] == pytest.approx(data["summary"]["guided_travel"])
+
+
 def test_a_rule_is_evaluated_on_the_fleet_without_training(small, tmp_path):
     run = tmp_path / "run"
     proc = run_script(

@@ -1,0 +1,86 @@
+"""The guided EVs of one fleet tick decided in turn, each seeing where the ones before it were sent.
+
+At a tick of the fleet (:mod:`evcd.env.fleet`) every guided EV due observes ``[D, N, Z, H]`` as it
+was before any of them acted: EVs that decide side by side do not see each other's new choices, and
+several can pick the same short queue together. A dispatcher that decides them *in turn* corrects
+the observation of each EV for the choices made before it at the same tick:
+
+- an EV sent to station ``s`` counts one more guided EV heading to ``s`` (``H[s] + 1``) for every EV
+  after it;
+- if it was counted elsewhere before the tick (heading to station ``c``: in the others' ``H[c]``;
+  waiting in ``c``'s car park: in their ``Z[c]``), that count loses one;
+- an EV that keeps its station changes nothing (it is already counted there).
+
+Where an EV was counted comes from the dispatcher's memory of where it sent it at its previous
+decision and, for an EV waiting in a car park, from its observation (``D == 0`` there). At an EV's
+first decision the dispatcher does not know where it was heading (its trip's own station, in the
+others' ``H``), so that count stays: one vehicle too many there for the EVs after it at that tick.
+:class:`~evcd.agents.fleet_rules.CentralAgent` does the same bookkeeping on its own estimates; a
+learner does it on its network's inputs (``DQNConfig.in_turn``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+
+def counted_at(d: np.ndarray, episodes: Sequence[Any]) -> np.ndarray:
+    """Per EV (rows of ``d``), the station it is counted at as far as the dispatcher knows (-1:
+    unknown): where it waits (``D == 0``: in that station's ``Z``; ``D`` in any unit), else the
+    ``station`` its episode state says it was last sent to (``None``: unknown)."""
+    waiting = d == 0.0
+    last = np.array([-1 if e.station is None else e.station for e in episodes], dtype=np.int64)
+    return np.where(waiting.any(axis=1), np.argmax(waiting, axis=1), last)
+
+
+def decide_in_turn(
+    obs: np.ndarray,
+    counted: np.ndarray,
+    waiting: np.ndarray,
+    vehicle: np.ndarray,
+    order: Sequence[int] | np.ndarray,
+    choose: Callable[[int, np.ndarray], int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Decide the rows of ``obs`` one after the other, each on its observation corrected for the
+    choices before it (module docstring).
+
+    Args:
+        obs: the ``k`` EVs' fleet observations ``[D, N, Z, H]``, shape ``(k, 4m)``, in the env's units.
+        counted: per EV, the station it is counted at before the tick (-1: unknown; :func:`counted_at`).
+        waiting: per EV, whether it is counted in ``Z`` (waiting in that car park) rather than ``H``.
+        vehicle: per station, what one vehicle is in the observation's ``Z`` and ``H`` units (1, or
+            ``1 / points`` for a normalised observation), shape ``(m,)``.
+        order: the rows in the order they decide (a permutation of ``range(k)``).
+        choose: ``choose(row, seen)`` -> the station of EV ``row`` given the observation it sees.
+
+    Returns:
+        The ``k`` stations (int64) and the observations the EVs decided on (``(k, 4m)``, float32).
+
+    Raises:
+        ValueError: ``obs`` is not ``(k, 4m)``, or ``order`` is not a permutation of its rows.
+    """
+    seen = np.array(obs, dtype=np.float32)
+    if seen.ndim != 2 or seen.shape[1] % 4:
+        raise ValueError(f"observations of shape {seen.shape}: expected (k, 4m), [D, N, Z, H] per row")
+    k, width = seen.shape
+    m = width // 4
+    if sorted(int(j) for j in order) != list(range(k)):
+        raise ValueError(f"order {list(order)}: must be a permutation of the {k} rows")
+    moved_z = np.zeros(m)  # vehicles that left each car park at this tick so far
+    moved_h = np.zeros(m)  # guided EVs heading to each station: added (+) and removed (-) so far
+    stations = np.empty(k, dtype=np.int64)
+    for j in order:
+        row = seen[j]
+        row[2 * m : 3 * m] = np.maximum(0.0, row[2 * m : 3 * m] + moved_z * vehicle)
+        row[3 * m :] = np.maximum(0.0, row[3 * m :] + moved_h * vehicle)
+        s = int(choose(int(j), row))
+        stations[j] = s
+        c = int(counted[j])
+        if c != s:
+            moved_h[s] += 1.0
+            if c >= 0:
+                (moved_z if waiting[j] else moved_h)[c] -= 1.0
+    return stations, seen
