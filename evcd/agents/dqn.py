@@ -14,6 +14,8 @@
   ``exploration_steps`` transitions, per slot or per episode (:class:`DQNEpisode`); its draws come
   from the episode's generator (so an episode does not depend on those run before it), replay
   sampling from the agent's own generator, drawn from ``rng`` at construction.
+- On the fleet (``[D, N, Z, H]``), ``in_turn`` decides the EVs of one tick one after the other, each
+  seeing the stations chosen before it (:meth:`DQNAgent.decide_in_turn`, :mod:`evcd.agents.in_turn`).
 - The network's input is the observation in physical units (m, vehicles) times :attr:`input_scale`:
   km, tens of vehicles and multiples of the charging points for an agent made for an environment
   (``points``), whether that environment normalises its observations or not (``normalized``); a
