@@ -32,13 +32,8 @@ OBS_DIM = 3 * M
 SMALL = {"hidden": (16, 16), "batch_size": 8, "buffer_size": 64}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """One thread (tiny networks: faster), put back after every test."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+#: one torch thread (tiny networks: faster), put back after every test
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _agent(seed: int = 0, n_stations: int = M, **kwargs) -> DQNAgent:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from evcd.agents import make_agent
 from evcd.agents.dqn_state import checkpoint_agent_config
@@ -17,12 +16,8 @@ M = 2
 SMALL = {"hidden": (16, 16), "batch_size": 8, "buffer_size": 64, "learning_starts": 1000}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+#: one torch thread (tiny networks: faster), put back after every test
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _row(d=(500.0, 800.0), n=(1.0, 2.0), z=(0.0, 0.0), h=(0.0, 0.0)) -> np.ndarray:
