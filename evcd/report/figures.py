@@ -87,7 +87,8 @@ def plot_results_bars(
         if paper and any(a in paper for a in agents):
             handles.append(Line2D([], [], ls="", marker="D", mfc="white", mec="0.2", mew=1.8,
                                   label="paper (whole day, training mean)"))  # fmt: skip
-        ax.legend(handles=handles, fontsize=8, loc="upper left")
+        ax.set_ylim(0.0, ax.get_ylim()[1] * 1.18)  # headroom: the legend above the tallest whisker
+        ax.legend(handles=handles, fontsize=8, loc="upper left", ncols=min(3, len(handles)))
     default = "Evaluation mean travel time: mean over seeds, 95% interval across seeds (Student t)"
     fig.suptitle(title or default)
     fig.tight_layout()
