@@ -15,7 +15,7 @@
   from the episode's generator (so an episode does not depend on those run before it), replay
   sampling from the agent's own generator, drawn from ``rng`` at construction.
 - On the fleet (``[D, N, Z, H]``), ``in_turn`` decides the EVs of one tick one after the other, each
-  seeing the stations chosen before it (:meth:`DQNAgent.decide_in_turn`, :mod:`evcd.agents.in_turn`).
+  seeing the stations chosen before it (:mod:`evcd.agents.in_turn`).
 - The network's input is the observation in physical units (m, vehicles) times :attr:`input_scale`:
   km, tens of vehicles and multiples of the charging points for an agent made for an environment
   (``points``), whether that environment normalises its observations or not (``normalized``); a
@@ -30,9 +30,8 @@ from __future__ import annotations
 import copy
 import dataclasses
 import logging
-from collections import deque
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -43,15 +42,15 @@ from torch.nn import functional as F  # noqa: N812  (torch's convention)
 
 from evcd.agents.base import (
     Agent,
-    EpisodeState,
     Transition,
     check_blocks,
     observation_layout,
     observation_units,
 )
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
+from evcd.agents.dqn_episode import DQNEpisode
 from evcd.agents.dqn_state import STATE_FORMAT, check_policy_state
-from evcd.agents.in_turn import counted_at, decide_in_turn
+from evcd.agents.in_turn import hold, learner_tick
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
 from evcd.env.observation import unit_divisors
@@ -59,27 +58,6 @@ from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
 from evcd.utils.validation import check_bool
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class DQNEpisode(EpisodeState):
-    """An episode of a DQN agent. Under ``exploration="episode"`` it holds the episode's one
-    exploration draw, made at its first decision while exploring.
-
-    Attributes:
-        drawn: whether the draw was made.
-        random_station: the station the whole episode then drives to; ``None``: it follows the network.
-    """
-
-    drawn: bool = False
-    random_station: int | None = None
-    #: n-step returns: this episode's transitions not stored yet (the last n - 1 at most)
-    pending: deque[Transition] = field(default_factory=deque)
-    #: ``in_turn`` (the fleet): the station it was sent to at its last decision, the observation it
-    #: decided on, and its last transition, stored once the observation of its next decision is known
-    station: int | None = None
-    seen: np.ndarray | None = None
-    held: Transition | None = None
 
 
 class DQNAgent(Agent):
@@ -245,57 +223,19 @@ class DQNAgent(Agent):
 
     def decide(self, obs: np.ndarray, episodes: Sequence[DQNEpisode], explore: bool = False) -> np.ndarray:
         """``argmax Q`` of each observation (one forward pass), epsilon-greedy per episode if ``explore``;
-        with ``in_turn``, the rows one after the other (:meth:`decide_in_turn`)."""
-        if self.config.in_turn:
-            return self.decide_in_turn(obs, episodes, explore)
+        with ``in_turn``, the rows one after the other (:func:`~evcd.agents.in_turn.learner_tick`)."""
+        if self.config.in_turn:  # the fleet's EVs of one tick one after the other
+            choose = lambda j, greedy: self._choose(greedy, episodes[j], explore)  # noqa: E731
+            return learner_tick(obs, episodes, self._vehicle, self.q_values, choose, self._push)
         greedy = self.q_values(obs).argmax(axis=-1)
         pairs = zip(greedy, episodes, strict=True)
         return np.array([self._choose(int(g), episode, explore) for g, episode in pairs], dtype=np.int64)
-
-    def decide_in_turn(
-        self, obs: np.ndarray, episodes: Sequence[DQNEpisode], explore: bool = False
-    ) -> np.ndarray:
-        """The fleet EVs of one tick (rows of ``obs``, ``(k, 4m)``) in turn: in order of their best
-        Q-value on the tick's observations (the soonest expected charge first; ties to the lower row),
-        each deciding (epsilon-greedy if ``explore``) on its observation corrected for the stations
-        chosen before it (:func:`~evcd.agents.in_turn.decide_in_turn`). Each episode keeps its
-        station and the observation it decided on; an EV's transition held since its previous
-        decision is stored now, its next observation being the one it decides on here (what its
-        next action was chosen on)."""
-        batch = np.asarray(obs, dtype=np.float32)
-        if batch.ndim != 2 or len(batch) != len(episodes):
-            raise ValueError(
-                f"observations of shape {batch.shape} for {len(episodes)} episodes: one row each"
-            )
-        order = np.argsort(-self.q_values(batch).max(axis=1), kind="stable")
-        d = batch[:, : self.n_stations]
-        counted = counted_at(d, episodes)
-        waiting = (d == 0.0).any(axis=1)
-
-        def choose(j: int, row: np.ndarray) -> int:
-            return self._choose(int(self.q_values(row).argmax()), episodes[j], explore)
-
-        stations, seen = decide_in_turn(batch, counted, waiting, self._vehicle, order, choose)
-        for episode, s, row in zip(episodes, stations, seen, strict=True):
-            episode.station, episode.seen = int(s), row
-            if episode.held is not None:
-                self._push(episode.held._replace(next_obs=row), episode)
-                episode.held = None
-        return stations
 
     def _choose(self, greedy: int, episode: DQNEpisode, explore: bool) -> int:
         """The action given the greedy one: the exploration draws, from the episode's generator."""
         if not explore:
             return greedy
-        rng = episode.rng
-        if self.config.exploration == "episode":
-            if not episode.drawn:  # the episode's first decision: explore it or not
-                draw, station = rng.random(), int(rng.integers(self.n_stations))
-                episode.drawn = True
-                episode.random_station = station if draw < self.epsilon else None
-            return greedy if episode.random_station is None else episode.random_station
-        draw, station = rng.random(), int(rng.integers(self.n_stations))
-        return station if draw < self.epsilon else greedy
+        return episode.choose(greedy, self.epsilon, self.n_stations, self.config.exploration)
 
     # ------------------------------------------------------------------ learning
     def observe(self, transition: Transition, episode: DQNEpisode | None = None) -> None:
@@ -306,17 +246,12 @@ class DQNAgent(Agent):
         episode ended): its reward becomes the discounted sum of the (up to) ``n`` rewards, its
         next observation the one ``n`` steps on, and its bootstrap is discounted by ``gamma ** n``.
         With ``in_turn`` the transition's observation is the one the EV decided on, and its next
-        observation the one it decides on at its next tick (:meth:`decide_in_turn` stores it then).
+        observation the one it decides on at its next tick (:func:`~evcd.agents.in_turn.hold`).
         """
         c = self.config
         ep = self.episode if episode is None else episode
         if c.in_turn and ep.seen is not None:  # decided in turn: learn from what it decided on
-            transition = transition._replace(obs=ep.seen)
-            ep.seen = None
-            if transition.terminated or transition.truncated:
-                self._push(transition, ep)
-            else:  # its next observation is the one it will decide on (decide_in_turn stores it)
-                ep.held = transition
+            hold(transition, ep, self._push)
         else:
             self._push(transition, ep)
         self.steps += 1
@@ -326,18 +261,8 @@ class DQNAgent(Agent):
 
     def _push(self, transition: Transition, episode: DQNEpisode) -> None:
         """Into the replay, through ``episode``'s n-step window."""
-        if self.config.n_step == 1:
-            self._store((transition,))
-            return
-        pending = episode.pending
-        pending.append(transition)
-        if len(pending) == self.config.n_step:
-            self._store(pending)
-            pending.popleft()
-        if transition.terminated or transition.truncated:  # the episode ended: store what is left
-            while pending:
-                self._store(pending)
-                pending.popleft()
+        for window in episode.windows(transition, self.config.n_step):
+            self._store(window)
 
     def _store(self, window: Sequence[Transition]) -> None:
         """Store the first transition of ``window`` with the rewards of the whole window."""

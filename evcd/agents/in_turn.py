@@ -84,3 +84,56 @@ def decide_in_turn(
             if c >= 0:
                 (moved_z if waiting[j] else moved_h)[c] -= 1.0
     return stations, seen
+
+
+def learner_tick(
+    obs: np.ndarray,
+    episodes: Sequence[Any],
+    vehicle: np.ndarray,
+    q_values: Callable[[np.ndarray], np.ndarray],
+    choose: Callable[[int, int], int],
+    store: Callable[[Any, Any], None],
+) -> np.ndarray:
+    """A learner's tick in turn: the rows of ``obs`` (``(k, 4m)``) in order of their best Q-value on
+    the tick's observations (the soonest expected charge first; ties to the lower row), each deciding
+    on its observation corrected for the stations chosen before it (:func:`decide_in_turn`).
+
+    Each episode (a :class:`~evcd.agents.dqn_episode.DQNEpisode`) keeps its station and the
+    observation it decided on (``seen``); its transition held since its previous decision (``held``,
+    :func:`hold`) goes to ``store(transition, episode)`` now, its next observation being the one it
+    decides on here (what its next action was chosen on).
+
+    Args:
+        q_values: the network's Q-values of a row or a batch.
+        choose: ``choose(row, greedy)`` -> the action of EV ``row`` (exploration included).
+
+    Raises:
+        ValueError: ``obs`` is not ``(k, 4m)`` with one row per episode.
+    """
+    batch = np.asarray(obs, dtype=np.float32)
+    if batch.ndim != 2 or len(batch) != len(episodes):
+        raise ValueError(f"observations of shape {batch.shape} for {len(episodes)} episodes: one row each")
+    order = np.argsort(-q_values(batch).max(axis=1), kind="stable")
+    d = batch[:, : len(vehicle)]
+    pick = lambda j, row: choose(j, int(q_values(row).argmax()))  # noqa: E731
+    stations, seen = decide_in_turn(
+        batch, counted_at(d, episodes), (d == 0.0).any(axis=1), vehicle, order, pick
+    )
+    for episode, s, row in zip(episodes, stations, seen, strict=True):
+        episode.station, episode.seen = int(s), row
+        if episode.held is not None:
+            store(episode.held._replace(next_obs=row), episode)
+            episode.held = None
+    return stations
+
+
+def hold(transition: Any, episode: Any, store: Callable[[Any, Any], None]) -> None:
+    """A learner's transition of an EV decided in turn: its observation becomes the one the EV decided
+    on; a last transition (terminated or truncated) goes to ``store`` at once, any other waits in
+    ``episode.held`` for the observation of the EV's next decision (:func:`learner_tick`)."""
+    transition = transition._replace(obs=episode.seen)
+    episode.seen = None
+    if transition.terminated or transition.truncated:
+        store(transition, episode)
+    else:
+        episode.held = transition
