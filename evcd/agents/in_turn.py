@@ -39,7 +39,6 @@ def counted_at(d: np.ndarray, episodes: Sequence[Any]) -> np.ndarray:
 def decide_in_turn(
     obs: np.ndarray,
     counted: np.ndarray,
-    waiting: np.ndarray,
     vehicle: np.ndarray,
     order: Sequence[int] | np.ndarray,
     choose: Callable[[int, np.ndarray], int],
@@ -49,8 +48,8 @@ def decide_in_turn(
 
     Args:
         obs: the ``k`` EVs' fleet observations ``[D, N, Z, H]``, shape ``(k, 4m)``, in the env's units.
-        counted: per EV, the station it is counted at before the tick (-1: unknown; :func:`counted_at`).
-        waiting: per EV, whether it is counted in ``Z`` (waiting in that car park) rather than ``H``.
+        counted: per EV, the station it is counted at before the tick (-1: unknown; :func:`counted_at`):
+            in its ``Z`` if the EV waits in a car park (``D == 0`` there), else in its ``H``.
         vehicle: per station, what one vehicle is in the observation's ``Z`` and ``H`` units (1, or
             ``1 / points`` for a normalised observation), shape ``(m,)``.
         order: the rows in the order they decide (a permutation of ``range(k)``).
@@ -69,6 +68,7 @@ def decide_in_turn(
     m = width // 4
     if sorted(int(j) for j in order) != list(range(k)):
         raise ValueError(f"order {list(order)}: must be a permutation of the {k} rows")
+    waiting = (seen[:, :m] == 0.0).any(axis=1)
     moved_z = np.zeros(m)  # vehicles that left each car park at this tick so far
     moved_h = np.zeros(m)  # guided EVs heading to each station: added (+) and removed (-) so far
     stations = np.empty(k, dtype=np.int64)
@@ -116,9 +116,7 @@ def learner_tick(
     order = np.argsort(-q_values(batch).max(axis=1), kind="stable")
     d = batch[:, : len(vehicle)]
     pick = lambda j, row: choose(j, int(q_values(row).argmax()))  # noqa: E731
-    stations, seen = decide_in_turn(
-        batch, counted_at(d, episodes), (d == 0.0).any(axis=1), vehicle, order, pick
-    )
+    stations, seen = decide_in_turn(batch, counted_at(d, episodes), vehicle, order, pick)
     for episode, s, row in zip(episodes, stations, seen, strict=True):
         episode.station, episode.seen = int(s), row
         if episode.held is not None:

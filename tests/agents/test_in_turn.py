@@ -32,13 +32,13 @@ def _fewest_heading(j: int, row: np.ndarray) -> int:
 def test_each_ev_sees_the_stations_chosen_before_it() -> None:
     obs = np.stack([_row()] * 3)
     unknown = np.full(3, -1)
-    stations, seen = decide_in_turn(obs, unknown, np.zeros(3, bool), np.ones(M), [0, 1, 2], _fewest_heading)
+    stations, seen = decide_in_turn(obs, unknown, np.ones(M), [0, 1, 2], _fewest_heading)
     # side by side all three would take station 0; in turn they split 0, 1, 0
     assert stations.tolist() == [0, 1, 0]
     assert [row[3 * M :].tolist() for row in seen] == [[0, 0], [1, 0], [1, 1]]
     np.testing.assert_array_equal(seen[:, : 3 * M], obs[:, : 3 * M])  # D, N, Z untouched
     # another order: the last row decides first and sees nothing new
-    stations, seen = decide_in_turn(obs, unknown, np.zeros(3, bool), np.ones(M), [2, 1, 0], _fewest_heading)
+    stations, seen = decide_in_turn(obs, unknown, np.ones(M), [2, 1, 0], _fewest_heading)
     assert stations.tolist() == [0, 1, 0]
     assert [row[3 * M :].tolist() for row in seen] == [[1, 1], [1, 0], [0, 0]]
 
@@ -50,37 +50,32 @@ def test_an_ev_moved_from_where_it_was_counted_leaves_that_count() -> None:
     obs = np.stack(
         [_row(z=(0, 3), h=(1, 2)), _row(d=(400.0, 0.0), z=(0, 3), h=(1, 2)), _row(z=(0, 3), h=(1, 2))]
     )
-    counted = np.array([1, 1, 0])
-    waiting = np.array([False, True, False])
-    stations, seen = decide_in_turn(obs, counted, waiting, np.ones(M), [0, 1, 2], go_to_0)
+    counted = np.array([1, 1, 0])  # EV 1 waits (D == 0 at station 1): counted in Z
+    stations, seen = decide_in_turn(obs, counted, np.ones(M), [0, 1, 2], go_to_0)
     assert stations.tolist() == [0, 0, 0]
     assert seen[1, 2 * M :].tolist() == [0, 3, 2, 1]  # after EV 0: H[0] + 1, H[1] - 1
     assert seen[2, 2 * M :].tolist() == [0, 2, 3, 1]  # after EV 1 too: Z[1] - 1, H[0] + 1
     # an EV kept where it is counted changes nothing for those after it
-    stations, seen = decide_in_turn(
-        obs, np.array([0, 0, 0]), np.zeros(3, bool), np.ones(M), [0, 1, 2], go_to_0
-    )
+    stations, seen = decide_in_turn(obs, np.array([0, 0, 0]), np.ones(M), [0, 1, 2], go_to_0)
     np.testing.assert_array_equal(seen, obs)
 
 
 def test_normalised_observations_move_by_one_vehicle_in_their_units() -> None:
     points = np.array([2.0, 4.0])
     obs = np.stack([_row(h=(0.5, 0.25))] * 2)
-    stations, seen = decide_in_turn(
-        obs, np.array([0, -1]), np.zeros(2, bool), 1.0 / points, [0, 1], lambda j, row: 1
-    )
+    stations, seen = decide_in_turn(obs, np.array([0, -1]), 1.0 / points, [0, 1], lambda j, row: 1)
     assert stations.tolist() == [1, 1]
     assert seen[1, 3 * M :].tolist() == [0.0, 0.5]  # one vehicle less at 0 (1/2), one more at 1 (1/4)
 
 
 def test_counts_never_go_below_zero_and_bad_input_is_named() -> None:
     obs = np.stack([_row()] * 2)  # EV 0 said to be counted at station 1, but nobody is there
-    _, seen = decide_in_turn(obs, np.array([1, -1]), np.zeros(2, bool), np.ones(M), [0, 1], lambda j, r: 0)
+    _, seen = decide_in_turn(obs, np.array([1, -1]), np.ones(M), [0, 1], lambda j, r: 0)
     assert seen[1, 3 * M :].tolist() == [1.0, 0.0]
     with pytest.raises(ValueError, match=r"shape \(6,\)"):
-        decide_in_turn(np.zeros(6), np.full(1, -1), np.zeros(1, bool), np.ones(M), [0], _fewest_heading)
+        decide_in_turn(np.zeros(6), np.full(1, -1), np.ones(M), [0], _fewest_heading)
     with pytest.raises(ValueError, match="permutation"):
-        decide_in_turn(obs, np.full(2, -1), np.zeros(2, bool), np.ones(M), [0, 0], _fewest_heading)
+        decide_in_turn(obs, np.full(2, -1), np.ones(M), [0, 0], _fewest_heading)
 
 
 def test_counted_at_reads_waiting_evs_from_d_and_the_others_from_their_state() -> None:
