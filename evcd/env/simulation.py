@@ -3,15 +3,31 @@
 :class:`EpisodeSimulation` owns this process's one libsumo simulation (a :class:`SumoDriver`) and
 the stations' :class:`ChargingController`, and positions both at the target's departure time:
 
-- ``fast``: the latest day snapshot before the departure is loaded into the running simulation
-  and simulated from there to the departure. Snapshots are built on first use of a day
-  (:mod:`evcd.sim.snapshots`). The driver of the current day stays alive across episodes, except
-  that SUMO is restarted before loading a snapshot *earlier* than one loaded (and run) since its
-  start: SUMO 1.28 re-reads the route file after a loadState but skips the vehicles it already
-  took from the later snapshot, so going back in time loses every background vehicle departing
-  between the two snapshots (seen: 74 of 300 in 15 min). A restart (about 1 s on Jurong West) is
-  cheaper than the alternative, ``--route-steps 0`` (every future vehicle in every snapshot: 10x
-  slower loads).
+- ``fast``: the latest day snapshot before the departure is loaded and simulated from there to
+  the departure. Snapshots are built on first use of a day (:mod:`evcd.sim.snapshots`). The
+  driver of the current day stays alive while the loads go *forward* (a snapshot at or after the
+  simulation's current time); a load that goes back in time, to a snapshot earlier than the time
+  the simulation has reached, first restarts SUMO (:func:`needs_restart`). Two things make that
+  necessary, both measured on SUMO 1.28:
+
+  * going back in time without a restart did not reproduce (issue 28, measured on the batched
+    engine): the same run gave other episodes from process to process, with the heap's layout
+    (address space randomisation, the hash seed, an unrelated allocation, a day built
+    earlier in the same process), and so did the learners trained on them. Each first difference
+    traced (three) was a background EV reaching a car park: it entered at once in one process and waited
+    on the lane in another. SUMO's car park keeps per-step bookkeeping of the vehicles about to
+    enter (``MSParkingArea``: the time step of its reservations, their count, pointers to the
+    vehicles) that loadState does not reset, so a load to an earlier time meets the reservations
+    of a later step of the replaced run. A load going forward (reservations older than the
+    loaded time are renewed at the next step) gave the same episodes as a restart before every
+    load, in every process (``tests/env/test_reproducible.py``);
+  * SUMO re-reads the route file after a loadState but skips the vehicles it already took from a
+    later time, so going back would also lose every background vehicle departing in between (seen:
+    74 of 300 in 15 min).
+
+  A restart costs about 0.2 s on Jurong West (``scripts/bench.py`` measures its share);
+  ``--route-steps 0`` (every future vehicle in every snapshot: 10x slower loads) is no
+  alternative for the second reason and none for the first.
 - ``paper``: a fresh simulation from 00:00 every episode, simulated to the departure; after the
   episode :meth:`finish_day` runs it on to ``day_end`` (23:59).
 
@@ -32,6 +48,14 @@ from evcd.sim.driver import SUMO_ERRORS, SumoDriver
 from evcd.sim.snapshots import CacheError, DayCache, DaySpec, snapshot_times
 
 log = logging.getLogger(__name__)
+
+_TIME_EPS = 1e-6  # seconds: times closer than this are the same step
+
+
+def needs_restart(now: float, snapshot_time: float) -> bool:
+    """Whether loading a snapshot of ``snapshot_time`` into a simulation at ``now`` needs a fresh SUMO:
+    when it goes back in time (module docstring; a load at or after ``now`` reproduces exactly)."""
+    return snapshot_time < now - _TIME_EPS
 
 
 class EpisodeSimulation:
@@ -70,7 +94,6 @@ class EpisodeSimulation:
         self._driver: SumoDriver | None = None
         self._day: int | None = None  # day of the running driver
         self._ready: set[int] = set()  # days whose snapshots (or routes) this process verified
-        self._high_water = -1.0  # latest snapshot loaded since the driver started
         self.restarts = 0  # SUMO starts (for the benchmark)
 
     # ------------------------------------------------------------------ state
@@ -124,11 +147,10 @@ class EpisodeSimulation:
         cache = self.caches[day]
         for attempt in range(2):
             snap = cache.latest_before(time)
-            if not self.running or self._day != day or snap.time < self._high_water:
+            if not self.running or self._day != day or needs_restart(self.time, snap.time):
                 self._restart(day)
             try:
                 cache.load(snap, self.driver, self.controller)
-                self._high_water = max(self._high_water, snap.time)
                 return
             except CacheError as exc:
                 if attempt:
@@ -148,7 +170,6 @@ class EpisodeSimulation:
         driver.start()
         driver.add_listener(self.controller.update)
         self._driver, self._day = driver, day
-        self._high_water = -1.0
         self.restarts += 1
 
     # ------------------------------------------------------------------ after an episode

@@ -2,7 +2,8 @@
 
 A *day* is everything that shapes the background traffic of one simulated day: the scenario files,
 the charging points, the demand (config and seed, or a fixed route file), SUMO's step length and
-teleport threshold, the SUMO version and the evcd code that generates and drives the day. Its
+teleport threshold, the versions of SUMO, numpy (which draws the demand) and sumolib (which reads the
+network), and the evcd code that generates and drives the day. Its
 :class:`DaySpec` hashes all of that into a key; :class:`DayCache` keeps, in a folder named by the key,
 
     routes.rou.xml.gz            the day's demand (generated once)
@@ -40,6 +41,7 @@ import contextlib
 import dataclasses
 import fcntl
 import hashlib
+import importlib.metadata
 import json
 import logging
 import math
@@ -72,8 +74,16 @@ _ENTRY_FIELDS = {"state", "state_sha256", "controller", "controller_sha256"}
 _told = [False]  # whether the one-time explanation of a day build was logged in this process
 # a progress bar over simulated time (of day) with the wall time left
 _BAR = "{desc}: {percentage:3.0f}% of {total:.0f} sim s [{elapsed}<{remaining}]"
-# the modules whose behaviour shapes a cached day: editing one invalidates the cache
-_CODE = ("scenario/demand.py", "scenario/routing.py", "sim/charging.py", "sim/driver.py", "sim/snapshots.py")
+# the modules whose behaviour shapes a cached day (the demand, the stations and vehicle types it reads,
+# the charging queues and their saved state, the SUMO driver): editing one invalidates the cache.
+# tests/sim/test_snapshots.py checks that every evcd module these import is listed.
+_CODE = (
+    "scenario/demand.py", "scenario/routing.py", "scenario/scenario.py", "scenario/stations_file.py",
+    "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/driver.py", "sim/snapshots.py",
+    "utils/atomic.py", "utils/sumo_tools.py", "utils/xml_files.py",
+)  # fmt: skip
+# the packages whose versions shape a cached day: numpy draws the demand, sumolib reads the network
+_PACKAGES = ("numpy", "sumolib")
 
 
 def default_cache_dir() -> Path:
@@ -153,6 +163,7 @@ class DaySpec:
         return {
             "format": FORMAT_VERSION,
             "sumo": libsumo.getVersion()[1],
+            "packages": {name: importlib.metadata.version(name) for name in _PACKAGES},
             "code": _code_hash(),
             "net": file_sha256(sc.net_file),
             "stations": file_sha256(sc.stations_file),

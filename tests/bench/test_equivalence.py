@@ -42,5 +42,5 @@ def test_fast_protocol_keeps_sumo_running(make_env):
         departures.append(out["info"]["departure"])
         assert env.simulation.time < PAPER_DAY_END  # stopped at charge start
     backwards = sum(b < a for a, b in itertools.pairwise(departures))
-    # SUMO restarts only to go back to an earlier snapshot (see evcd.env.simulation)
+    # SUMO restarts only to go back in time (see evcd.env.simulation)
     assert env.simulation.restarts <= 1 + backwards

@@ -70,6 +70,36 @@ def test_key_changes_with_everything_that_changes_the_day(spec, small_scenario):
         DaySpec(spec.scenario)
 
 
+def test_key_changes_with_the_packages_that_draw_and_read_the_day(spec, monkeypatch):
+    from evcd.sim import snapshots
+
+    real, base = snapshots.importlib.metadata.version, spec.key
+    for package in ("numpy", "sumolib"):
+        monkeypatch.setattr(snapshots.importlib.metadata, "version",
+                            lambda name, p=package: "0.0.1" if name == p else real(name))  # fmt: skip
+        assert DaySpec(spec.scenario, DEMAND, demand_seed=0).key != base, package
+    monkeypatch.undo()
+    assert DaySpec(spec.scenario, DEMAND, demand_seed=0).key == base
+
+
+def test_the_code_key_lists_every_evcd_module_a_day_depends_on():
+    """Every evcd module imported (transitively) by a module of the key is in the key, so that editing
+    one of them (e.g. how the stations file is read) cannot leave another day in the cache."""
+    import ast
+
+    from evcd.sim import snapshots
+
+    root = Path(snapshots.__file__).parents[1]
+    listed, todo = set(snapshots._CODE), list(snapshots._CODE)
+    while todo:
+        tree = ast.parse((root / todo.pop()).read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("evcd."):
+                rel = node.module.removeprefix("evcd.").replace(".", "/") + ".py"
+                assert rel in listed, f"{rel} shapes a cached day but is not in snapshots._CODE"
+    assert "scenario/stations_file.py" in listed and "sim/charge_record.py" in listed
+
+
 def test_second_run_builds_nothing(spec, tmp_path):
     first = DayCache(spec, tmp_path)
     snaps = first.ensure(TIMES)
