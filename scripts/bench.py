@@ -7,6 +7,14 @@
     python scripts/bench.py --suite throughput   # batched engine vs single env, learning, 2 processes
     python scripts/bench.py --suite engines --episodes 200 --batch-sizes 25 100   # engine equivalence
     python scripts/bench.py --suite fleet --episodes 3   # a fleet episode vs its day alone (400 EVs, peak)
+    python scripts/bench.py --suite determinism [train.py overrides ...]   # same seed, same result?
+
+``--suite determinism`` trains the same short run twice (the README job cut to 200 training and 20
+evaluation episodes, on ``--scenario`` with ``--evs``; train.py overrides given after the options
+are applied last), each in a fresh process with its own heap layout (another working directory,
+hash seed and an unrelated allocation first; the first run builds the days it lacks, the second
+loads them), then compares every episode row and the SHA-256 of the final agent state
+(:mod:`evcd.bench.determinism`): it prints ``identical`` or the first difference and exits 0 or 1.
 
 Every run also times the prioritized replay buffer: ``per_sample_update_us`` (sample a batch of 32
 from 10,000 transitions and update its priorities; also as ``replay_batch_us``) and
@@ -28,7 +36,11 @@ import argparse
 import dataclasses
 import json
 import logging
+import os
+import shutil
+import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from evcd.bench import engines as engine_bench
@@ -43,6 +55,7 @@ from evcd.utils.atomic import atomic_write_text
 log = logging.getLogger("bench")
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
+SCRIPTS = Path(__file__).resolve().parent
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -57,15 +70,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
-    p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet"), default="env",
+    p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet", "determinism"),
+                   default="env",
                    help="env (default): episodes, SUMO, replay; replay: the replay buffer alone; "
                         "throughput: the batched engine's speed; engines: batched vs single; "
-                        "fleet: a fleet episode against its day alone")  # fmt: skip
+                        "fleet: a fleet episode against its day alone; determinism: the same "
+                        "training twice in fresh processes, compared")  # fmt: skip
     p.add_argument("--episodes", type=int, default=200,
                    help="engines suite: episode seeds (default 200); fleet: episodes (~3)")  # fmt: skip
     p.add_argument("--guided-share", type=float, default=1.0, help="fleet suite: guided share (default 1)")
     p.add_argument("--batch-sizes", type=int, nargs="+", default=[25],
                    help="engines suite: batch_episodes values to compare (default 25)")  # fmt: skip
+    p.add_argument("overrides", nargs="*", help="determinism suite: train.py overrides (e.g. agent=dqn)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     if args.evs < 0 or args.fast_episodes < 1 or args.paper_episodes < 0:
@@ -75,6 +91,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.out.exists() and not args.force:
         log.error("%s exists; pass --force to replace it", args.out)
         return 2
+    if args.overrides and args.suite != "determinism":
+        log.error("train.py overrides %s are for --suite determinism only", args.overrides)
+        return 2
+    if args.suite == "determinism":
+        return run_determinism(args)
     replay = time_replay()
     log.info("replay buffer: %.1f us per batch of 32 (sample + priority update), %.2f us per transition",
              replay["per_sample_update_us"], replay["per_transition_us"])  # fmt: skip
@@ -148,6 +169,56 @@ def main(argv: list[str] | None = None) -> int:
         log.info("%-45s %s", key, value)
     log.info("wrote %s", args.out)
     return 0
+
+
+#: The determinism suite's run: the README job, shorter.
+DETERMINISM_RUN = ("agent=dueling_ddqn", "train.episodes=200", "train.checkpoint_every=100",
+                   "train.validation.every=0", "eval.episodes=20", "progress=false")  # fmt: skip
+#: The second process allocates this first, so that SUMO's objects lie elsewhere in its heap.
+_ALLOCATE_FIRST = (
+    "import runpy, sys\n"
+    "junk = [bytearray(1000 + (i * 7919) % 50000) for i in range(4000)]\n"
+    "del junk[::3]\n"
+    "sys.argv = [{script!r}, *sys.argv[1:]]\n"
+    "runpy.run_path({script!r}, run_name='__main__')\n"
+)
+
+
+def run_determinism(args: argparse.Namespace) -> int:
+    """Train the same run twice in fresh processes and compare them (module docstring)."""
+    from evcd.bench.determinism import compare_runs
+
+    script = str(SCRIPTS / "train.py")
+    work = Path(tempfile.mkdtemp(prefix="evcd-determinism-"))
+    common = [*DETERMINISM_RUN, f"scenario.path={args.scenario}", f"evs={args.evs}"]
+    if args.cache_dir is not None:
+        common.append(f"env.cache_dir={args.cache_dir}")
+    processes = [  # (hash seed, working directory, command)
+        ("0", SCRIPTS.parent, [sys.executable, script]),
+        ("1", work, [sys.executable, "-c", _ALLOCATE_FIRST.format(script=script)]),
+    ]
+    runs = []
+    for i, (hash_seed, cwd, cmd) in enumerate(processes, start=1):
+        run = work / f"run{i}"
+        log.info("run %d of 2 (fresh process, PYTHONHASHSEED=%s, in %s) -> %s", i, hash_seed, cwd, run)
+        with open(work / f"run{i}.log", "w") as out:
+            proc = subprocess.run([*cmd, *common, *args.overrides, f"hydra.run.dir={run}"], cwd=cwd,
+                                  env={**os.environ, "PYTHONHASHSEED": hash_seed}, stdout=out,
+                                  stderr=subprocess.STDOUT)  # fmt: skip
+        if proc.returncode != 0:
+            log.error("run %d failed (exit %d); its log: %s", i, proc.returncode, work / f"run{i}.log")
+            return 2
+        runs.append(run)
+    report = compare_runs(*runs)
+    report["overrides"] = [*common, *args.overrides]
+    atomic_write_text(args.out, json.dumps(report, indent=1))
+    if report["identical"]:
+        log.info("identical: %s rows, %s transitions, policy sha256 %s; wrote %s", report["rows"],
+                 report["transitions"][0], report["policy_sha256"][0], args.out)  # fmt: skip
+        shutil.rmtree(work)
+        return 0
+    log.error("NOT identical: %s (runs kept in %s); wrote %s", report["first_difference"], work, args.out)
+    return 1
 
 
 def run_engine_suite(args: argparse.Namespace, env_kwargs: dict, replay: dict) -> dict:

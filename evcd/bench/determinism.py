@@ -1,0 +1,114 @@
+"""Same seed, same result: compare two finished runs of ``scripts/train.py`` (or ``evaluate.py``).
+
+``scripts/bench.py --suite determinism`` trains the same short run twice, each in a fresh Python
+process with its own heap layout (another working directory and hash seed; the first may build the
+days, the second loads them), then compares the two run directories here: every episode row of
+every episode file (the wall times aside) and a SHA-256 of the final agent state in the checkpoint
+(networks, optimiser, replay buffer, generators), with the one of the policy (the online network)
+beside it.
+
+    report = compare_runs(Path("outputs/a"), Path("outputs/b"))
+    report["identical"], report["first_difference"]
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from evcd.utils.checkpoint import load_checkpoint
+
+#: Columns that measure the machine, not the run.
+WALL_COLUMNS = ("wall_s",)
+CHECKPOINTS = "checkpoints"
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    """The rows of an episode file, without the wall-clock columns."""
+    with open(path, newline="") as f:
+        return [{k: v for k, v in row.items() if k not in WALL_COLUMNS} for row in csv.DictReader(f)]
+
+
+def _update(h: Any, obj: Any) -> None:
+    """Feed ``obj`` (nested dicts, lists, tensors, arrays, numbers, strings) into the hash ``h``."""
+    if isinstance(obj, Mapping):
+        for key in sorted(obj, key=str):
+            h.update(f"<{key}>".encode())
+            _update(h, obj[key])
+    elif isinstance(obj, list | tuple):
+        h.update(f"[{len(obj)}]".encode())
+        for item in obj:
+            _update(h, item)
+    elif isinstance(obj, torch.Tensor):
+        array = obj.detach().cpu().contiguous().numpy()
+        h.update(f"{array.dtype}{array.shape}".encode())
+        h.update(array.tobytes())
+    elif isinstance(obj, np.ndarray):
+        h.update(f"{obj.dtype}{obj.shape}".encode())
+        h.update(np.ascontiguousarray(obj).tobytes())
+    else:
+        h.update(repr(obj).encode())
+
+
+def state_sha256(state: Any) -> str:
+    """Hex SHA-256 of a (nested) state: the same values in the same structure give the same digest."""
+    h = hashlib.sha256()
+    _update(h, state)
+    return h.hexdigest()
+
+
+def run_digest(run_dir: Path) -> dict[str, Any]:
+    """A run's episode rows per file, its transition count and the digests of its final agent state
+    (``None`` for a rule, which has no checkpoint)."""
+    run_dir = Path(run_dir)
+    files = {p.name: read_rows(p) for p in sorted(run_dir.glob("*episodes.csv"))}
+    agent = policy = None
+    if (run_dir / CHECKPOINTS).is_dir():
+        state = load_checkpoint(run_dir / CHECKPOINTS)["agent"]
+        agent = state_sha256(state)
+        policy = state_sha256(state["online"]) if isinstance(state, Mapping) and "online" in state else None
+    results = run_dir / "results.json"
+    training = json.loads(results.read_text()).get("training", {}) if results.is_file() else {}
+    return {"files": files, "transitions": training.get("transitions"), "agent_sha256": agent,
+            "policy_sha256": policy}  # fmt: skip
+
+
+def first_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> str | None:
+    """Where two :func:`run_digest` results first differ (a sentence), or ``None`` if they do not."""
+    if sorted(a["files"]) != sorted(b["files"]):
+        return f"the runs wrote different episode files: {sorted(a['files'])} vs {sorted(b['files'])}"
+    for name, rows_a in a["files"].items():
+        rows_b = b["files"][name]
+        for i, (x, y) in enumerate(zip(rows_a, rows_b, strict=False)):
+            if x != y:
+                cols = [k for k in x if x.get(k) != y.get(k)]
+                return (f"{name}: row {i} (episode {x.get('episode')}) differs in {cols}: "
+                        f"{[x.get(k) for k in cols]} vs {[y.get(k) for k in cols]}")  # fmt: skip
+        if len(rows_a) != len(rows_b):
+            return f"{name}: {len(rows_a)} rows vs {len(rows_b)}"
+    for key in ("transitions", "policy_sha256", "agent_sha256"):
+        if a[key] != b[key]:
+            return f"{key}: {a[key]} vs {b[key]}"
+    return None
+
+
+def compare_runs(a: Path, b: Path) -> dict[str, Any]:
+    """Compare two finished run directories: ``identical``, ``first_difference`` and what was compared."""
+    da, db = run_digest(a), run_digest(b)
+    diff = first_difference(da, db)
+    return {
+        "identical": diff is None,
+        "first_difference": diff,
+        "runs": [str(a), str(b)],
+        "rows": {name: len(rows) for name, rows in da["files"].items()},
+        "transitions": [da["transitions"], db["transitions"]],
+        "policy_sha256": [da["policy_sha256"], db["policy_sha256"]],
+        "agent_sha256": [da["agent_sha256"], db["agent_sha256"]],
+    }
