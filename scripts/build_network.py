@@ -5,7 +5,9 @@
 
 Writes ``<out>/net.net.xml.gz`` (left-hand traffic, passenger roads, largest strongly connected
 component; see ``evcd.scenario.network``) and prints a one-line summary of the network. Building
-twice from the same input gives the same bytes.
+twice from the same input gives the same bytes. A folder that already holds a network is left as it
+is unless ``--force`` is given (its stations file names lanes of that network: rebuild the stations
+too, ``scripts/place_stations.py --force``).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ def main(argv: list[str] | None = None) -> int:
         action="store_false",
         help="drop highway=service roads (car-park aisles, driveways)",
     )
+    p.add_argument("--force", action="store_true", help="replace the network of an existing scenario folder")
     p.add_argument("-v", "--verbose", action="store_true", help="log the netconvert command lines")
     args = p.parse_args(argv)
     logging.basicConfig(
@@ -41,6 +44,12 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
         stream=sys.stdout,
     )
+    existing = sorted(args.out.glob("*.net.xml*")) if args.out.is_dir() else []
+    if existing and not args.force:
+        log.error("%s already holds a network (%s); pass --force to replace it (and then place the stations "
+                  "again: the stations file names lanes of the old network)", args.out,
+                  ", ".join(p.name for p in existing))  # fmt: skip
+        return 2
     try:
         net_file = build_network(
             args.out, graphml=args.graphml, osm=args.osm, include_service=args.include_service

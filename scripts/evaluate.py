@@ -31,6 +31,7 @@ from evcd.agents import make_agent_for_env
 from evcd.agents.dqn_state import checkpoint_agent_config
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.params import agent_params, env_kwargs, fleet_kwargs
+from evcd.cli.run_record import write_run_record
 from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
@@ -90,6 +91,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
             raise FileExistsError(f"{path} exists: evaluate into a fresh run directory")
     env = ChargingNavEnv(**env_kwargs(cfg))  # validates every env value; loads the scenario, no SUMO
     agent = make_dispatcher(name, env, agent_rng(seed), **params)
+    write_run_record(out_dir, cfg)  # every check passed
     log.info("%s on %s, evs=%s, %d episodes, seed %d", agent, env.scenario.root, cfg.evs, episodes, seed)
 
     runner = make_runner(env, engine, batch)
@@ -129,6 +131,7 @@ def run_fleet(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     env = FleetEnv(**fleet_kwargs(cfg))  # validates every value; loads the scenario, no SUMO
     env.check_days()  # every day has EVs to guide (its routes, no SUMO)
     agent = make_agent_for_env(name, env, agent_rng(seed), **params)
+    write_run_record(out_dir, cfg)  # every check passed
     log.info("fleet: %s on %s, evs=%s, guided_share %s, %d episodes, seed %d", agent, env.scenario.root,
              cfg.evs, env.guided_share, episodes, seed)  # fmt: skip
     try:
@@ -171,7 +174,7 @@ def main(cfg: DictConfig) -> float:
     try:
         return run(cfg, out_dir)["mean_travel_time"]
     except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
-        stop_on_bad_setting(exc, log)
+        stop_on_bad_setting(exc, log, out_dir, cfg)
 
 
 if __name__ == "__main__":

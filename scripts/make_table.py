@@ -44,6 +44,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.resamples < 1:
         log.error("--resamples=%d: must be >= 1", args.resamples)
         return 2
+    for d in args.dirs:
+        if not d.is_dir():
+            log.error("%s %s: give the multirun directories (or run directories) of finished runs", d,
+                      "is not a directory" if d.exists() else "does not exist")  # fmt: skip
+            return 2
     try:
         if args.fleet:
             out = make_fleet_table(args.dirs, args.out, overwrite=args.overwrite,

@@ -16,11 +16,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import sumolib
 
 from evcd.scenario.placement import Anchor, place_stations, station_distances
 from evcd.scenario.routing import RoadGraph
-from evcd.scenario.scenario import STATIONS_FILE, VTYPES_FILE, find_net_file
+from evcd.scenario.scenario import STATIONS_FILE, VTYPES_FILE, find_net_file, read_net
 from evcd.scenario.stations_file import write_stations
 from evcd.scenario.vtypes import write_vtypes
 
@@ -58,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
         out = args.scenario / STATIONS_FILE
         if out.exists() and not args.force:
             raise ValueError(f"{out} exists; pass --force to replace it")
-        net = sumolib.net.readNet(str(find_net_file(args.scenario)))
+        net = read_net(find_net_file(args.scenario))
         stations = place_stations(
             net, args.k, args.min_spacing, np.random.default_rng(args.seed), anchors=args.anchor,
             points=args.points, power_w=args.power_kw * 1000.0,

@@ -31,13 +31,14 @@ from omegaconf import DictConfig, OmegaConf
 from evcd.agents import make_agent_for_env
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.params import agent_params, config_days, env_kwargs, fleet_kwargs, learner_config
+from evcd.cli.run_record import write_run_record
 from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.fleet_train import FleetTrainSettings, train_and_evaluate_fleet
-from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
+from evcd.loops.hindsight import DISPATCHERS, dispatcher_learns, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng, days_of_seed
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
@@ -148,17 +149,45 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         envs["validation"] = ChargingNavEnv(
             **{**base, "demand_seeds": days, **_window(cfg, "train.validation.departure_window")}
         )
-        rules = {str(r): make_dispatcher(str(r), envs["validation"], baseline_rng(seed))
-                 for r in cfg.train.validation.rules}  # fmt: skip
+        rules = {str(r): make_dispatcher(str(check_rule(r, "train.validation.rules")), envs["validation"],
+                                         baseline_rng(seed)) for r in cfg.train.validation.rules}  # fmt: skip
     agent = make_dispatcher(name, envs["train"], agent_rng(settings.seed), **params)
+    check_learning_starts(agent, settings.episodes, envs["train"].config)
     baselines = {}
     for rule in cfg.eval.baselines:
+        check_rule(rule, "eval.baselines")
         baselines[str(rule)] = make_dispatcher(str(rule), envs["eval"], baseline_rng(settings.seed))
-        if baselines[str(rule)].learns:
-            raise ValueError(f"eval.baselines: {rule!r} is not a rule (random, greedy, queue_aware, "
-                             "hindsight)")  # fmt: skip
     return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules,
             "runner": lambda phase: make_runner(envs[phase], engine, batch)}  # fmt: skip
+
+
+def check_rule(name: Any, key: str) -> str:
+    """``name`` if it is a rule of the single target (a baseline needs no training).
+
+    Raises:
+        ValueError: naming ``key``, the value and the rules allowed there.
+    """
+    rules = [d for d in DISPATCHERS if not dispatcher_learns(d)]
+    if name not in rules:
+        kind = "a learner, not a rule" if name in DISPATCHERS else "not a rule"
+        raise ValueError(f"{key}: {name!r} is {kind}; the rules: {', '.join(rules)}")
+    return str(name)
+
+
+def check_learning_starts(agent: Any, episodes: int, env_config: Any) -> None:
+    """Refuse a learner that cannot take one gradient step: ``learning_starts`` above the transitions
+    ``episodes`` training episodes can hold at most (an episode decides at most once per
+    ``decision_interval`` until ``max_travel_time``). The twin of DQNConfig's ``batch_size`` check;
+    :func:`evcd.loops.best_policy.check_learned` refuses to report a learner that took none."""
+    starts = getattr(getattr(agent, "config", None), "learning_starts", None)
+    if starts is None or not getattr(agent, "learns", False):
+        return
+    per_episode = int(env_config.max_travel_time // env_config.decision_interval) + 1
+    if starts > episodes * per_episode:
+        raise ValueError(f"learner.learning_starts={starts}: the {episodes} training episodes hold at most "
+                         f"{episodes * per_episode} transitions ({per_episode} each: max_travel_time / "
+                         "decision_interval), so the network would never learn; lower learning_starts or "
+                         "raise train.episodes")  # fmt: skip
 
 
 def _fleet_rule(name: Any, env: FleetEnv, seed: int, key: str) -> Any:
@@ -214,8 +243,8 @@ def train_fleet(cfg: DictConfig, out_dir: Path) -> float:
              out_dir)  # fmt: skip
     config = OmegaConf.to_container(cfg, resolve=True)
     result = train_and_evaluate_fleet(agent, envs, settings, out_dir, baselines=parts["baselines"],
-                                      resume=bool(cfg.resume), config=config,
-                                      validation_rules=parts["rules"])  # fmt: skip
+                                      resume=bool(cfg.resume), config=config, validation_rules=parts["rules"],
+                                      on_start=lambda: write_run_record(out_dir, cfg))  # fmt: skip
     for line in fleet_report_lines(result, cfg.evs):
         log.info("%s", line)
     return float(result.summary["guided_travel"])
@@ -270,6 +299,7 @@ def train(cfg: DictConfig) -> float:
         resume=bool(cfg.resume),
         config=OmegaConf.to_container(cfg, resolve=True),
         validation_rules=parts["rules"],
+        on_start=lambda: write_run_record(out_dir, cfg),  # once the run directory passed its checks
     )
     for line in report_lines(result, cfg.evs):
         log.info("%s", line)
@@ -324,7 +354,7 @@ def main(cfg: DictConfig) -> float:
     try:
         return train(cfg)
     except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
-        stop_on_bad_setting(exc, log)
+        stop_on_bad_setting(exc, log, Path(HydraConfig.get().runtime.output_dir), cfg)
 
 
 if __name__ == "__main__":

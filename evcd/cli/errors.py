@@ -4,13 +4,19 @@ from __future__ import annotations
 
 import logging
 import sys
+from pathlib import Path
 from typing import NoReturn
 
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
+from omegaconf import DictConfig
+
+from evcd.cli.run_record import RECORD_DIR, discard_refused_run_dir, process_start, write_run_record
 
 
-def stop_on_bad_setting(exc: Exception, log: logging.Logger) -> NoReturn:
+def stop_on_bad_setting(
+    exc: Exception, log: logging.Logger, run_dir: Path | None = None, cfg: DictConfig | None = None
+) -> NoReturn:
     """End a script's run on ``exc`` (a bad setting, a missing file, a corrupted checkpoint), logged as
     an error.
 
@@ -20,8 +26,19 @@ def stop_on_bad_setting(exc: Exception, log: logging.Logger) -> NoReturn:
     with Hydra's error naming the failed job's overrides (exit code 1). A ``SystemExit`` would escape
     ``run_job`` and end the whole sweep at once: the basic launcher stops at that job, and the joblib
     launcher exits with code 2 without finishing (or even starting) the others.
+
+    A single run refused before it wrote anything leaves no directory behind: ``run_dir`` is removed
+    if it holds nothing but this process's log (:func:`~evcd.cli.run_record.discard_refused_run_dir`;
+    the message is on the console). A job of a multirun keeps its directory with its log, and gets
+    its record (``cfg``) if it has none yet, so that ``scripts/make_table.py`` names it as failed with
+    its reason; an existing record (another run's) is never replaced.
     """
     log.error("%s", exc)
     if HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN:
+        if run_dir is not None and cfg is not None and not (run_dir / RECORD_DIR).exists():
+            write_run_record(run_dir, cfg)
         raise exc
+    if run_dir is not None:
+        logging.shutdown()  # close the log file before its directory goes
+        discard_refused_run_dir(run_dir, process_start())
     sys.exit(2)

@@ -78,3 +78,22 @@ def policy_to_evaluate(
     if not (settings.select_best and episodes):
         return episodes
     return load_best(run_dir, agent, record).episodes_done
+
+
+def check_learned(agent: Any, episodes: int) -> None:
+    """Refuse to evaluate a learner that trained for ``episodes`` without one gradient step (its
+    network is the untrained one: ``learning_starts`` above every transition the run saw).
+
+    Raises:
+        ValueError: naming the transitions seen and ``learning_starts`` (the checkpoint is kept).
+    """
+    if not episodes or not hasattr(agent, "stats") or not agent.learns:
+        return
+    stats = agent.stats()
+    if stats.get("gradient_steps", 1) == 0:
+        starts = getattr(getattr(agent, "config", None), "learning_starts", "?")
+        seen = int(stats.get("transitions", 0))
+        raise ValueError(f"the learner took no gradient step in {episodes} training episodes "
+                         f"({seen} transitions, learner.learning_starts={starts}): "
+                         "its network is untrained, so it is not evaluated; lower learning_starts or "
+                         "train longer (the checkpoint is kept)")  # fmt: skip

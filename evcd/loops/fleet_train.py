@@ -39,7 +39,7 @@ import dataclasses
 import logging
 import math
 import time as wallclock
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -50,7 +50,7 @@ from tqdm import tqdm
 
 from evcd.agents.base import Agent
 from evcd.env.fleet import FleetEnv
-from evcd.loops.best_policy import keep_if_best, policy_to_evaluate
+from evcd.loops.best_policy import check_learned, keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.fleet import FleetEpisode, evaluate_fleet, fleet_spec, play_fleet
 from evcd.loops.fleet_figure import plot_fleet_traces
@@ -258,9 +258,11 @@ def train_and_evaluate_fleet(
     resume: bool = False,
     config: Mapping[str, Any] | None = None,
     validation_rules: Mapping[str, Agent] | None = None,
+    on_start: Callable[[], None] | None = None,
 ) -> FleetTrainResult:
     """Train ``agent`` on the fleet (if it learns), evaluate it and the ``baselines`` on the same
-    held-out fleet episodes; write the run's files (module docstring).
+    held-out fleet episodes; write the run's files (module docstring). ``on_start`` is called once
+    ``run_dir`` passed every check, before anything is written into it.
 
     Raises:
         FileExistsError, FileNotFoundError: a new run where one wrote, a resume where none did.
@@ -268,7 +270,7 @@ def train_and_evaluate_fleet(
         CheckpointError: the checkpoint is damaged or not a fleet training checkpoint.
     """
     run_dir = Path(run_dir)
-    state, tlog = start_run(run_dir, agent, resume, config, FleetTrainState)
+    state, tlog = start_run(run_dir, agent, resume, config, FleetTrainState, on_start)
     episodes = settings.episodes if agent.learns else 0
     try:
         if episodes and state.episodes_done < episodes:
@@ -277,6 +279,7 @@ def train_and_evaluate_fleet(
                 validator = FleetValidator(envs["validation"], settings.validation, settings.seed,
                                            validation_rules or {})  # fmt: skip
             _train(agent, envs, settings, run_dir, state, config, tlog, validator)
+        check_learned(agent, episodes)
         selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
         training = {**_training_summary(agent, state, episodes), "evaluated_after_episodes": selected}
         result = _evaluate(agent, envs["eval"], settings, baselines or {}, training)

@@ -44,7 +44,7 @@ import numpy as np
 
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRow, EpisodeRunner, EpisodeSpec
-from evcd.loops.best_policy import keep_if_best, policy_to_evaluate
+from evcd.loops.best_policy import check_learned, keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
 from evcd.loops.progress import EpisodeProgress
@@ -199,6 +199,7 @@ def train_and_evaluate(
     resume: bool = False,
     config: Mapping[str, Any] | None = None,
     validation_rules: Mapping[str, Agent] | None = None,
+    on_start: Callable[[], None] | None = None,
 ) -> TrainResult:
     """Train ``agent`` (if it learns), evaluate it and the ``baselines`` on the same held-out episodes.
 
@@ -214,6 +215,7 @@ def train_and_evaluate(
             compared on resume.
         validation_rules: the rules validated on the periodic validation's episodes beside the agent
             (``settings.validation``; ``runners("validation")`` makes its runner).
+        on_start: called once ``run_dir`` passed every check, before anything is written into it.
 
     Raises:
         FileExistsError, FileNotFoundError: see :func:`check_run_dir`.
@@ -221,7 +223,7 @@ def train_and_evaluate(
         CheckpointError: the checkpoint is corrupted or does not fit the agent.
     """
     run_dir = Path(run_dir)
-    state, tlog = start_run(run_dir, agent, resume, config, TrainState)
+    state, tlog = start_run(run_dir, agent, resume, config, TrainState, on_start)
     episodes = settings.episodes if agent.learns else 0
     try:
         if episodes and state.episodes_done < episodes:
@@ -230,6 +232,7 @@ def train_and_evaluate(
                 validator = Validator(runners, settings.validation, settings.seed, validation_rules or {})
             _train(agent, runners, dataclasses.replace(settings, episodes=episodes), run_dir, state, config,
                    tlog, validator)  # fmt: skip
+        check_learned(agent, episodes)
         selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
         evaluation, bases = _evaluate(agent, runners, settings, baselines or {})
         paired = {name: paired_difference(evaluation.rows, base.rows, bootstrap_rng(settings.seed),

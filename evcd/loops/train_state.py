@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Protocol, TypeVar
@@ -95,12 +95,19 @@ def training_counters(stats: Mapping[str, Any], state: Any, episodes: int) -> di
 
 
 def start_run(
-    run_dir: Path, agent: Any, resume: bool, config: Mapping[str, Any] | None, state_cls: type[S]
+    run_dir: Path,
+    agent: Any,
+    resume: bool,
+    config: Mapping[str, Any] | None,
+    state_cls: type[S],
+    on_start: Callable[[], None] | None = None,
 ) -> tuple[S, TrainLog]:
     """Enter ``run_dir`` for a new run or to resume one: the trainer's position (the checkpoint's with
     ``resume`` and an ``agent`` that learns, else a fresh ``state_cls()``) and the run's TensorBoard log
     (a resumed run hides what the interrupted one wrote after its checkpoint; a new one records the
-    config). The caller closes the log.
+    config). The caller closes the log. ``on_start`` is called once every check passed, before anything
+    is written (the scripts write the run's Hydra record then: a refused run leaves the directory as
+    it was).
 
     Raises:
         FileExistsError, FileNotFoundError: see :func:`check_run_dir`; or a resume of a complete run.
@@ -113,6 +120,8 @@ def start_run(
     state = state_cls()
     if agent.learns and resume and has_checkpoint(run_dir / CHECKPOINTS):
         state = restore_training(run_dir, agent, config, state_cls)
+    if on_start is not None:
+        on_start()
     tlog = TrainLog(run_dir / TENSORBOARD, purge_step=state.transitions if resume else None)  # type: ignore[attr-defined]
     if not resume:
         tlog.config(config or {}, repr(agent))

@@ -34,7 +34,7 @@ from evcd.report.figures import agent_colors, plot_results_bars, plot_validation
 from evcd.report.markdown import format_stat, markdown_table, num
 from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import SeedStat, seed_interval
-from evcd.report.sweep import Collection, ResultsError, collect
+from evcd.report.sweep import Collection, ResultsError, WrongTaskError, collect
 from evcd.report.table import GAP_RULE, validation_gaps, validation_points, validation_rule_means
 from evcd.utils.atomic import atomic_write_text
 
@@ -107,10 +107,11 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
     """The :class:`FleetJob` of a fleet run's parsed ``results.json``.
 
     Raises:
-        ValueError: not a fleet run; KeyError, TypeError: a field is missing or malformed.
+        WrongTaskError: not a fleet run; KeyError, TypeError: a field is missing or malformed.
     """
     if data.get("task") != "fleet":
-        raise ValueError("not a fleet run (results.json has no task: fleet): make its table without --fleet")
+        raise WrongTaskError(f"{job_dir} is a single-target run, not a fleet run (its results.json has no "
+                             "task: fleet): make its table without --fleet")  # fmt: skip
     summary, config, training = data["summary"], data["config"], data.get("training") or {}
     if not isinstance(config, Mapping):
         raise KeyError("config")

@@ -42,6 +42,11 @@ class ResultsError(ValueError):
     """The inputs cannot make a table (not a run directory, duplicated jobs, ...)."""
 
 
+class WrongTaskError(ResultsError):
+    """A finished job of the other task (a fleet run in the single target's table, or the reverse):
+    the whole table is refused, since its jobs are not missing but of another kind."""
+
+
 class IncompleteSweepError(ResultsError):
     """Jobs of a sweep are missing or failed; :attr:`gaps` lists them."""
 
@@ -225,7 +230,8 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
         KeyError, TypeError, ValueError: a field is missing or malformed.
     """
     if data.get("task") == "fleet":
-        raise ValueError("a fleet run (task=fleet): make its table with scripts/make_table.py --fleet")
+        raise WrongTaskError(f"{job_dir} is a fleet run (task=fleet): make its table with "
+                             "scripts/make_table.py --fleet")  # fmt: skip
     summary, training = data["summary"], data.get("training") or {}
     config = data.get("config")
     if not isinstance(config, Mapping):
@@ -278,6 +284,8 @@ def read_job(job_dir: Path, overrides: Sequence[str] = (), parse: Parser = job_r
         return JobGap("failed", tuple(overrides), job_dir, reason)
     try:
         return parse(json.loads(path.read_text()), job_dir)
+    except WrongTaskError:
+        raise
     except (OSError, ValueError, KeyError, TypeError) as exc:
         reason = f"{RESULTS_JSON} unreadable ({type(exc).__name__}: {exc})"
         return JobGap("failed", tuple(overrides), job_dir, reason)

@@ -11,6 +11,7 @@ Any folder of that shape works; :func:`load_scenario` checks it before anything 
 from __future__ import annotations
 
 import logging
+import xml.sax
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -49,12 +50,30 @@ class Scenario:
     @cached_property
     def net(self) -> sumolib.net.Net:
         """The network, read with sumolib (a second or two for a town; cached)."""
-        return sumolib.net.readNet(str(self.net_file))
+        return read_net(self.net_file)
 
     @property
     def additional_files(self) -> list[Path]:
         """Files SUMO loads with ``--additional-files`` (vehicle types first)."""
         return [self.vtypes_file, self.stations_file]
+
+
+def read_net(net_file: str | Path) -> sumolib.net.Net:
+    """Read a SUMO network with sumolib.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is damaged or not a SUMO network (a truncated ``.gz``, broken XML, a
+            ``<net>`` without its attributes), naming the file and what sumolib found.
+    """
+    net_file = Path(net_file)
+    if not net_file.is_file():
+        raise FileNotFoundError(f"SUMO network not found: {net_file}")
+    try:
+        return sumolib.net.readNet(str(net_file))
+    except (OSError, EOFError, KeyError, ValueError, xml.sax.SAXException) as exc:
+        raise ValueError(f"{net_file} is damaged or not a SUMO network ({type(exc).__name__}: {exc}); "
+                         "build it again with scripts/build_network.py") from exc  # fmt: skip
 
 
 def find_net_file(root: Path) -> Path:

@@ -74,15 +74,11 @@ _ENTRY_FIELDS = {"state", "state_sha256", "controller", "controller_sha256"}
 _told = [False]  # whether the one-time explanation of a day build was logged in this process
 # a progress bar over simulated time (of day) with the wall time left
 _BAR = "{desc}: {percentage:3.0f}% of {total:.0f} sim s [{elapsed}<{remaining}]"
-# the modules whose behaviour shapes a cached day (the demand, the stations and vehicle types it reads,
-# the charging queues and their saved state, the SUMO driver): editing one invalidates the cache.
-# tests/sim/test_snapshots.py checks that every evcd module these import is listed.
-_CODE = (
-    "scenario/demand.py", "scenario/routing.py", "scenario/scenario.py", "scenario/stations_file.py",
-    "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/driver.py", "sim/snapshots.py",
-    "utils/atomic.py", "utils/sumo_tools.py", "utils/xml_files.py",
-)  # fmt: skip
-# the packages whose versions shape a cached day: numpy draws the demand, sumolib reads the network
+# the modules (each evcd module these import is listed: tests/sim/test_snapshots.py) and the packages
+# (numpy draws the demand, sumolib reads the network) that shape a cached day: a change invalidates it
+_CODE = ("scenario/demand.py", "scenario/routing.py", "scenario/scenario.py", "scenario/stations_file.py",
+         "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/driver.py", "sim/snapshots.py",
+         "utils/atomic.py", "utils/sumo_tools.py", "utils/xml_files.py")  # fmt: skip
 _PACKAGES = ("numpy", "sumolib")
 
 
@@ -204,11 +200,18 @@ class DayCache:
     Args:
         spec: the day.
         cache_dir: the cache root; default :func:`default_cache_dir`.
+
+    Raises:
+        ValueError: the cache root is a file.
     """
 
     def __init__(self, spec: DaySpec, cache_dir: str | Path | None = None) -> None:
         self.spec = spec
         self.root = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
+        if self.root.exists() and not self.root.is_dir():
+            source = "cache_dir" if cache_dir is not None else f"${CACHE_ENV} (or the default cache folder)"
+            raise ValueError(f"the day cache {self.root} (from {source}) is a file, not a folder: point it "
+                             "at a folder, or unset it for ~/.cache/evcd")  # fmt: skip
         self._verified: dict[Path, tuple[int, int]] = {}  # path -> (size, mtime_ns) when checked
         self._snapshots: dict[float, Snapshot] = {}
         self.built_times: list[float] = []  # snapshot times this object built (0 if it reused all)

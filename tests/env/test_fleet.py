@@ -96,6 +96,9 @@ def test_a_bad_action_names_the_agent_and_the_range(make_fleet) -> None:
         env.step({agent: 7})
     with pytest.raises(ValueError, match="not an agent of this step"):
         env.step({"nobody": 0})
+    with pytest.raises(TypeError, match=r"step takes a dict \{agent: station index\}.*not a list: \[0, 1\]"):
+        env.step([0, 1])
+    env.step({agent: 0})  # nothing was sent by the refused calls: the episode goes on
 
 
 # ------------------------------------------------------------------------------------ competition

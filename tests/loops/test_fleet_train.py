@@ -5,6 +5,7 @@ the weights of an uninterrupted one."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -226,7 +227,9 @@ def test_a_single_target_checkpoint_is_not_resumed_as_a_fleet_run(
 ) -> None:
     """The two trainers' checkpoints differ in format: resuming one as the other stops with one line."""
     single = make_env()
-    agent = make_agent_for_env("dqn", single, np.random.default_rng(0), config=CONFIG)
+    # learns from its first transitions: a learner without a gradient step is refused before evaluation
+    config = dataclasses.replace(CONFIG, learning_starts=4, batch_size=4)
+    agent = make_agent_for_env("dqn", single, np.random.default_rng(0), config=config)
     run = tmp_path / "run"
     settings = TrainSettings(episodes=2, eval_episodes=1, seed=0, checkpoint_every=1, progress=False)
     with pytest.raises(KeyboardInterrupt):

@@ -24,7 +24,7 @@ from evcd.report.fleet_table import (
     make_fleet_table,
     paired_fleet,
 )
-from evcd.report.sweep import IncompleteSweepError, ResultsError, collect
+from evcd.report.sweep import ResultsError, WrongTaskError, collect
 from evcd.report.table import validation_gaps, validation_points
 from tests.conftest import run_script
 from tests.report.test_make_table import results_json as single_results_json
@@ -186,15 +186,16 @@ def test_a_nan_episode_is_left_out_of_its_pairs(tmp_path) -> None:
 
 
 def test_a_single_target_job_is_not_a_fleet_job_and_the_reverse(tmp_path) -> None:
+    """A job of the other task is not a job that did not finish: the table is refused, naming the job
+    and the flag (not the incomplete-sweep message and its --allow-incomplete)."""
     sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware",))
     (job,) = sweep.glob("*_share0.5_seed1")
     (job / "results.json").write_text(json.dumps(single_results_json("greedy", 300, 1)))
-    with pytest.raises(IncompleteSweepError, match="not a fleet run"):
-        make_fleet_table([sweep], tmp_path / "out")
-    with pytest.raises(IncompleteSweepError, match=r"make_table\.py --fleet"):
+    for allow in (False, True):
+        with pytest.raises(WrongTaskError, match=f"{job.name} is a single-target run.*without --fleet"):
+            make_fleet_table([sweep], tmp_path / "out", allow_incomplete=allow)
+    with pytest.raises(WrongTaskError, match=r"is a fleet run.*make_table\.py --fleet"):
         collect([sweep])  # the single-target table refuses the fleet jobs, naming the flag
-    out = make_fleet_table([sweep], tmp_path / "out", allow_incomplete=True)
-    assert len(out.collection.gaps) == 1 and "Jobs that did not finish" in out.markdown
 
 
 def test_two_jobs_of_one_cell_are_refused(tmp_path) -> None:
@@ -211,7 +212,8 @@ def test_make_table_fleet_on_the_command_line(tmp_path) -> None:
     assert "### Paired differences on the guided EVs" in proc.stdout
     assert (tmp_path / "out" / BARS_PNG).exists()
     proc = run_script("make_table.py", str(sweep), "--out", str(tmp_path / "single"), timeout=300)
-    assert proc.returncode == 1 and "make_table.py --fleet" in proc.stderr
+    assert proc.returncode == 2 and "make_table.py --fleet" in proc.stderr  # another kind: bad input
+    assert "allow-incomplete" not in proc.stderr
 
 
 def test_validation_curves_per_cell_pair_each_seed_with_queue_aware(tmp_path) -> None:

@@ -425,6 +425,11 @@ def test_script_exit_codes(tmp_path):
     rows = list(csv.DictReader(io.StringIO((tmp_path / "out2" / CSV_NAME).read_text())))
     assert len(rows) == 5
 
+    for missing, why in ((tmp_path / "nonexistent", "does not exist"), (tmp_path / "out2" / CSV_NAME,
+                                                                        "is not a directory")):  # fmt: skip
+        bad = make_table_script(missing, "--out", tmp_path / "out3")
+        assert bad.returncode == 2 and f"{missing} {why}" in bad.stderr
+
 
 # ---------------------------------------------------------------------------------------- days and pairs
 #: queue_aware's travel times of the 4 evaluation episodes of seed s are QA + 10 s; dqn adds

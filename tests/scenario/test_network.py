@@ -438,6 +438,19 @@ def test_script_builds_and_summarises(tiny_graphml, tmp_path):
     assert (tmp_path / "net.net.xml.gz").is_file()
 
 
+def test_script_refuses_to_replace_a_scenario_network_without_force(tiny_graphml, tmp_path):
+    scenario = tmp_path / "scenario"
+    assert run_script("--graphml", str(tiny_graphml), "--out", str(scenario)).returncode == 0
+    net = scenario / "net.net.xml.gz"  # the network a stations file was placed on
+    (scenario / "stations.add.xml").write_text("<additional/>")
+    before = net.stat().st_mtime_ns, net.read_bytes()
+    proc = run_script("--graphml", str(tiny_graphml), "--no-service", "--out", str(scenario))
+    assert proc.returncode == 2 and "already holds a network" in proc.stdout and "--force" in proc.stdout
+    assert (net.stat().st_mtime_ns, net.read_bytes()) == before
+    forced = run_script("--graphml", str(tiny_graphml), "--no-service", "--out", str(scenario), "--force")
+    assert forced.returncode == 0 and net.read_bytes() != before[1]
+
+
 def test_script_bad_input_is_exit_2_without_traceback(tmp_path):
     proc = run_script("--graphml", str(tmp_path / "missing.graphml"), "--out", str(tmp_path))
     assert proc.returncode == 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -10,6 +11,7 @@ import pytest
 
 from evcd.scenario.scenario import STATIONS_FILE, VTYPES_FILE, load_scenario
 from evcd.scenario.stations_file import read_stations, write_stations
+from tests.conftest import run_script
 
 
 @pytest.fixture
@@ -76,3 +78,31 @@ def test_two_networks_are_ambiguous(scenario_copy):
 def test_bad_charging_points(grid_env_dir):
     with pytest.raises(ValueError, match="charging_points=0"):
         load_scenario(grid_env_dir, charging_points=0)
+
+
+def damage(scenario: Path, how: str) -> Path:
+    """Replace the scenario's network by a damaged ``.net.xml.gz``: truncated, or valid gzip of broken XML."""
+    plain = scenario / "grid.net.xml"
+    if how == "truncated":
+        data = gzip.compress(plain.read_bytes())[:3000]
+    else:
+        data = gzip.compress(b'<net version="1.20"><location netOffset="0,0"/><edge id="a"')
+    plain.unlink()
+    net = scenario / "grid.net.xml.gz"
+    net.write_bytes(data)
+    return net
+
+
+@pytest.mark.parametrize("how", ["truncated", "broken-xml"])
+def test_a_damaged_network_is_named_not_a_traceback(scenario_copy, tmp_path, how):
+    net = damage(scenario_copy, how)
+    with pytest.raises(ValueError, match=rf"{net} is damaged or not a SUMO network .*build_network"):
+        load_scenario(scenario_copy)
+    for script, args in (("place_stations.py", [scenario_copy, "--k", "2", "--force"]),
+                         ("evaluate.py", ["agent=greedy", f"scenario.path={scenario_copy}", "evs=30",
+                                          f"hydra.run.dir={tmp_path / 'run'}"])):  # fmt: skip
+        proc = run_script(script, *map(str, args))
+        out = proc.stdout + proc.stderr
+        assert proc.returncode == 2 and "is damaged or not a SUMO network" in out, out[-2000:]
+        assert "Traceback" not in out
+    assert not (tmp_path / "run").exists()  # the refused evaluation left no directory

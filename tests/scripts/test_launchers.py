@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from omegaconf import DictConfig
 
+from evcd.report.sweep import IncompleteSweepError
 from evcd.report.table import CSV_NAME, MD_NAME, make_table
 from tests.conftest import CONF, compose_config, run_script
 
@@ -122,6 +123,10 @@ def test_a_failing_job_fails_alone_and_the_sweep_reports_it(small, tmp_path):
     assert not (failed / "results.json").exists()
     assert "eval.episodes=0: must be an integer >= 1" in (failed / "train.log").read_text()
     assert "Error executing job with overrides" in proc.stderr and "eval.episodes=0" in proc.stderr
+    # the refused job has its own record (written at its refusal): the table names it, with why
+    assert "eval.episodes=0" in (failed / ".hydra" / "overrides.yaml").read_text()
+    with pytest.raises(IncompleteSweepError, match=r"failed: .*eval\.episodes=0.*must be an integer >= 1"):
+        make_table([out], tmp_path / "table", resamples=200)
 
 
 def test_a_failing_evaluation_job_fails_alone_too(small, tmp_path):

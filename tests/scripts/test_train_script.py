@@ -362,7 +362,10 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("evs=-1", "evs=-1"),
         ("eval.days=[]", "eval.days=[]"),
         ("env.demand_seeds=[4]", "train.days"),
-        ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is not a rule"),
+        ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is a learner, not a rule; the rules: random"),
+        ("eval.baselines=[foo]", "eval.baselines: 'foo' is not a rule; the rules: random, greedy"),
+        ("train.validation.every=2 train.validation.rules=[dqn]", "validation.rules: 'dqn' is a learner"),
+        ("train.episodes=4 learner.learning_starts=1000", "learning_starts=1000: the 4 training episodes"),
         ("resume=true", "no checkpoint"),
         ("agent.checkpoint=x.pt", "agent.checkpoint"),
         ("engine=fast", "engine='fast'"),
@@ -383,6 +386,16 @@ def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
     log = proc.stdout + proc.stderr
     assert needle in log
     assert "simulating the day" not in log and not (out / "results.json").exists()
+
+
+def test_a_learner_that_took_no_gradient_step_is_not_reported(small, tmp_path):
+    out = tmp_path / "run"
+    proc = run_train(*small, "agent=dqn", "train.episodes=2", "train.checkpoint_every=2",
+                     "learner.learning_starts=200", f"hydra.run.dir={out}")  # fmt: skip
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert "took no gradient step in 2 training episodes" in proc.stdout + proc.stderr
+    assert not (out / "results.json").exists() and not (out / "episodes.csv").exists()
+    assert load_checkpoint(out / "checkpoints")["trainer"]["episodes_done"] == 2  # kept
 
 
 def test_single_and_batched_engines_play_the_same_episodes(small, tmp_path):

@@ -53,6 +53,17 @@ def test_default_cache_dir_follows_the_environment(monkeypatch, tmp_path):
     assert default_cache_dir() == tmp_path / "mine"
 
 
+def test_a_cache_root_that_is_a_file_is_refused_naming_it(spec, monkeypatch, tmp_path):
+    a_file = tmp_path / "cache.txt"
+    a_file.write_text("not a folder")
+    monkeypatch.setenv(CACHE_ENV, str(a_file))
+    with pytest.raises(ValueError, match=rf"{a_file} \(from \$EVCD_CACHE.*is a file, not a folder"):
+        DayCache(spec)
+    with pytest.raises(ValueError, match=r"from cache_dir\) is a file"):
+        DayCache(spec, a_file)
+    assert a_file.read_text() == "not a folder"
+
+
 def test_key_changes_with_everything_that_changes_the_day(spec, small_scenario):
     same = DaySpec(load_scenario(small_scenario.root), DEMAND, demand_seed=0)
     assert same.key == spec.key

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import functools
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -252,6 +252,9 @@ class FleetEnv(ParallelEnv):
         next tick (further, while no guided EV is on its way and some will still depart)."""
         if self._ended or not self.agents:
             raise RuntimeError("the episode is over (or never began): call reset()")
+        if not isinstance(actions, Mapping):
+            raise TypeError(f"step takes a dict {{agent: station index}} (the agents: env.agents), not a "
+                            f"{type(actions).__name__}: {actions!r}")  # fmt: skip
         sim = self.simulation
         now = sim.time
         for agent, action in actions.items():
