@@ -12,22 +12,23 @@ the stations' :class:`ChargingController`, and positions both at the target's de
 
   * going back in time without a restart did not reproduce (issue 28, measured on the batched
     engine): the same run gave other episodes from process to process, with the heap's layout
-    (address space randomisation, the hash seed, an unrelated allocation, a day built
-    earlier in the same process), and so did the learners trained on them. Each first difference
-    traced (three) was a background EV reaching a car park: it entered at once in one process and waited
+    (address space randomisation, the hash seed, an unrelated allocation, a day built earlier in
+    the same process), and so did the learners trained on them. Each first difference traced
+    (three) was a background EV reaching a car park: it entered at once in one process and waited
     on the lane in another. SUMO's car park keeps per-step bookkeeping of the vehicles about to
     enter (``MSParkingArea``: the time step of its reservations, their count, pointers to the
     vehicles) that loadState does not reset, so a load to an earlier time meets the reservations
-    of a later step of the replaced run. A load going forward (reservations older than the
-    loaded time are renewed at the next step) gave the same episodes as a restart before every
-    load, in every process (``tests/env/test_reproducible.py``);
+    of a later step of the replaced run. A load going forward (reservations older than the loaded
+    time are renewed at the next step) gave the same episodes as a restart before every load, in
+    every process (``tests/env/test_reproducible.py``);
   * SUMO re-reads the route file after a loadState but skips the vehicles it already took from a
     later time, so going back would also lose every background vehicle departing in between (seen:
     74 of 300 in 15 min).
 
-  A restart costs about 0.2 s on Jurong West (``scripts/bench.py`` measures its share);
-  ``--route-steps 0`` (every future vehicle in every snapshot: 10x slower loads) is no
-  alternative for the second reason and none for the first.
+  A restart (start and close) costs about 0.23 s on Jurong West; the engines' rates in
+  ``scripts/bench.py --suite throughput`` include them. ``--route-steps 0`` (every future vehicle
+  in every snapshot: 10x slower loads) is no alternative for the second reason and none for the
+  first.
 - ``paper``: a fresh simulation from 00:00 every episode, simulated to the departure; after the
   episode :meth:`finish_day` runs it on to ``day_end`` (23:59).
 

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import pytest
 
 from evcd.cli.run_record import discard_refused_run_dir
 from tests.conftest import SCRIPTS, run_script
+from tests.scripts.test_train_script import KILL_MID_BATCH, KILLER
 
 RECORD = ("config.yaml", "overrides.yaml", "hydra.yaml")
 
@@ -46,6 +48,20 @@ def test_a_refused_run_leaves_the_record_of_the_run_it_refused(sweep, script_ove
     table = run_script("make_table.py", str(sweep), "--out", str(tmp_path / "table"))
     assert table.returncode == 0, table.stderr[-2000:]  # both jobs still found through their records
     assert "2 of 2 expected jobs finished" in table.stdout + table.stderr
+
+
+def test_a_refused_resume_with_changed_settings_leaves_the_record(script_overrides, tmp_path):
+    out = tmp_path / "run"
+    args = [*script_overrides, "agent=dqn", "learner.hidden=[16,16]", "learner.learning_starts=4",
+            "learner.batch_size=4", "train.episodes=4", "train.checkpoint_every=2", "eval.episodes=2",
+            f"hydra.run.dir={out}"]  # fmt: skip
+    killed = run_script("train.py", *args, code=KILLER.format(patch=textwrap.dedent(KILL_MID_BATCH.format(
+        when=3)), script=str(SCRIPTS / "train.py")))  # fmt: skip
+    assert killed.returncode == -9, killed.stderr[-2000:]
+    before = record(out)
+    proc = run_script("train.py", *args, "resume=true", "learner.lr=0.005")
+    assert proc.returncode == 2 and "learner.lr" in proc.stdout + proc.stderr
+    assert record(out) == before
 
 
 def test_a_run_refused_before_its_start_leaves_no_directory(script_overrides, tmp_path):
