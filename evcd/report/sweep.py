@@ -227,6 +227,7 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
     """The :class:`JobResult` of a job's parsed ``results.json``.
 
     Raises:
+        WrongTaskError: a fleet run.
         KeyError, TypeError, ValueError: a field is missing or malformed.
     """
     if data.get("task") == "fleet":
