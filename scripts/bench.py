@@ -174,19 +174,11 @@ def main(argv: list[str] | None = None) -> int:
 #: The determinism suite's run: the README job, shorter.
 DETERMINISM_RUN = ("agent=dueling_ddqn", "train.episodes=200", "train.checkpoint_every=100",
                    "train.validation.every=0", "eval.episodes=20", "progress=false")  # fmt: skip
-#: The second process allocates this first, so that SUMO's objects lie elsewhere in its heap.
-_ALLOCATE_FIRST = (
-    "import runpy, sys\n"
-    "junk = [bytearray(1000 + (i * 7919) % 50000) for i in range(4000)]\n"
-    "del junk[::3]\n"
-    "sys.argv = [{script!r}, *sys.argv[1:]]\n"
-    "runpy.run_path({script!r}, run_name='__main__')\n"
-)
 
 
 def run_determinism(args: argparse.Namespace) -> int:
     """Train the same run twice in fresh processes and compare them (module docstring)."""
-    from evcd.bench.determinism import compare_runs
+    from evcd.bench.determinism import ALLOCATE_FIRST, compare_runs
 
     script = str(SCRIPTS / "train.py")
     work = Path(tempfile.mkdtemp(prefix="evcd-determinism-"))
@@ -195,7 +187,7 @@ def run_determinism(args: argparse.Namespace) -> int:
         common.append(f"env.cache_dir={args.cache_dir}")
     processes = [  # (hash seed, working directory, command)
         ("0", SCRIPTS.parent, [sys.executable, script]),
-        ("1", work, [sys.executable, "-c", _ALLOCATE_FIRST.format(script=script)]),
+        ("1", work, [sys.executable, "-c", ALLOCATE_FIRST.format(script=script)]),
     ]
     runs = []
     for i, (hash_seed, cwd, cmd) in enumerate(processes, start=1):

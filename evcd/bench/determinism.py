@@ -25,6 +25,15 @@ import torch
 
 from evcd.utils.checkpoint import load_checkpoint
 
+#: ``python -c`` code that runs ``script`` after an unrelated allocation pattern, so that the objects the
+#: run allocates (SUMO's included) lie elsewhere in the heap than in a plain start.
+ALLOCATE_FIRST = (
+    "import runpy, sys\n"
+    "junk = [bytearray(1000 + (i * 7919) % 50000) for i in range(4000)]\n"
+    "del junk[::3]\n"
+    "sys.argv = [{script!r}, *sys.argv[1:]]\n"
+    "runpy.run_path({script!r}, run_name='__main__')\n"
+)
 #: Columns that measure the machine, not the run.
 WALL_COLUMNS = ("wall_s",)
 CHECKPOINTS = "checkpoints"

@@ -43,6 +43,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from evcd.env.episode_rules import TIME_EPS
 from evcd.scenario.scenario import Scenario
 from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SUMO_ERRORS, SumoDriver
@@ -50,13 +51,11 @@ from evcd.sim.snapshots import CacheError, DayCache, DaySpec, snapshot_times
 
 log = logging.getLogger(__name__)
 
-_TIME_EPS = 1e-6  # seconds: times closer than this are the same step
-
 
 def needs_restart(now: float, snapshot_time: float) -> bool:
     """Whether loading a snapshot of ``snapshot_time`` into a simulation at ``now`` needs a fresh SUMO:
     when it goes back in time (module docstring; a load at or after ``now`` reproduces exactly)."""
-    return snapshot_time < now - _TIME_EPS
+    return snapshot_time < now - TIME_EPS
 
 
 class EpisodeSimulation:

@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from evcd.bench.determinism import ALLOCATE_FIRST
 from evcd.utils.checkpoint import load_checkpoint
 from tests.conftest import ROOT, SCRIPTS
 from tests.scripts.test_train_script import KILL_MID_BATCH, final_weights, read_csv
@@ -36,14 +37,6 @@ BUSY = [
     "eval.bootstrap_resamples=200", "progress=false",
 ]  # fmt: skip
 FILES = ("train_episodes.csv", "episodes.csv", "baseline_greedy_episodes.csv")
-#: runs train.py after an unrelated allocation pattern (another heap layout for SUMO's objects)
-ALLOCATE_FIRST = """
-import runpy, sys
-junk = [bytearray(1000 + (i * 7919) % 50000) for i in range(4000)]
-del junk[::3]
-sys.argv = [{script!r}, *sys.argv[1:]]
-runpy.run_path({script!r}, run_name="__main__")
-"""
 
 
 def train(
@@ -95,7 +88,7 @@ def test_the_same_training_from_a_warm_cache_in_another_process_is_identical(col
     cwd = tmp_path / ("another-working-directory-with-a-much-longer-path" * 2)
     cwd.mkdir()
     script = str(SCRIPTS / "train.py")
-    code = textwrap.dedent(ALLOCATE_FIRST.format(script=script))
+    code = ALLOCATE_FIRST.format(script=script)  # another heap layout for SUMO's objects
     proc = train(tmp_path / "warm", cache, script_grid, cwd=cwd, hash_seed="4242", code=code)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "simulating a background day" not in proc.stdout + proc.stderr  # every day came from the cache
