@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +28,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.agents import make_agent_for_env
-from evcd.agents.dqn_state import checkpoint_agent_config
+from evcd.agents import agent_class, make_agent_for_env
+from evcd.agents.saved_policy import saved_policy
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.params import agent_params, env_kwargs, fleet_kwargs
 from evcd.cli.run_record import write_run_record
@@ -57,21 +58,31 @@ from evcd.utils.validation import check_int
 log = logging.getLogger("evaluate")
 
 
-def trained_policy(name: str, params: dict[str, Any], learns: bool) -> dict[str, Any]:
-    """The agent's arguments: a learner's must name its trained policy (``agent.checkpoint``), whose
-    network settings it takes.
+def trained_policy(
+    name: str, params: dict[str, Any], learns: bool
+) -> tuple[dict[str, Any], Mapping[str, Any] | None]:
+    """The agent's arguments and, for a learner, its trained policy (``agent.checkpoint``), whose
+    network settings the arguments take (:meth:`~evcd.agents.Agent.checkpoint_options`); load the
+    policy into the agent once it is made.
 
     Raises:
         ValueError: a learner without ``agent.checkpoint``.
-        CheckpointError: the checkpoint does not hold a DQN agent.
+        CheckpointError: the checkpoint is unreadable or does not hold an agent of this kind.
     """
+    path = params.pop("checkpoint", None)
     if not learns:
-        return params
-    if params.get("checkpoint") is None:
+        return params, None
+    if path is None:
         raise ValueError(f"agent {name!r} learns: give the trained policy with agent.checkpoint=PATH "
                          "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
-    params["checkpoint"] = to_absolute_path(str(params["checkpoint"]))
-    return {**checkpoint_agent_config(params["checkpoint"]), **params}
+    path = to_absolute_path(str(path))
+    policy = saved_policy(path)
+    try:
+        options = agent_class(name).checkpoint_options(policy)
+    except CheckpointError as exc:
+        raise CheckpointError(f"checkpoint {path!r}: {exc}") from exc
+    log.info("%s: the trained policy of %s", name, path)
+    return {**options, **params}, policy
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
@@ -83,7 +94,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     seed = check_int("seed", cfg.seed, minimum=0)
     resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
     name, params = agent_params(cfg)  # unknown agent -> ValueError listing the known ones
-    params = trained_policy(name, params, dispatcher_learns(name))
+    params, policy = trained_policy(name, params, dispatcher_learns(name))
     engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
     files = [out_dir / EVAL_CSV, out_dir / RESULTS_JSON]
     for path in files:
@@ -91,6 +102,8 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
             raise FileExistsError(f"{path} exists: evaluate into a fresh run directory")
     env = ChargingNavEnv(**env_kwargs(cfg))  # validates every env value; loads the scenario, no SUMO
     agent = make_dispatcher(name, env, agent_rng(seed), **params)
+    if policy is not None:
+        agent.load_state_dict(policy, policy_only=True)
     write_run_record(out_dir, cfg)  # every check passed
     log.info("%s on %s, evs=%s, %d episodes, seed %d", agent, env.scenario.root, cfg.evs, episodes, seed)
 
@@ -123,7 +136,7 @@ def run_fleet(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = str(params.pop("name"))
-    params = trained_policy(name, params, fleet_dispatcher_learns(name))
+    params, policy = trained_policy(name, params, fleet_dispatcher_learns(name))
     files = [out_dir / FLEET_CSV, out_dir / RESULTS_JSON, out_dir / FLEET_PNG]
     for path in files:
         if path.exists():
@@ -131,6 +144,8 @@ def run_fleet(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     env = FleetEnv(**fleet_kwargs(cfg))  # validates every value; loads the scenario, no SUMO
     env.check_days()  # every day has EVs to guide (its routes, no SUMO)
     agent = make_agent_for_env(name, env, agent_rng(seed), **params)
+    if policy is not None:
+        agent.load_state_dict(policy, policy_only=True)
     write_run_record(out_dir, cfg)  # every check passed
     log.info("fleet: %s on %s, evs=%s, guided_share %s, %d episodes, seed %d", agent, env.scenario.root,
              cfg.evs, env.guided_share, episodes, seed)  # fmt: skip
@@ -163,7 +178,7 @@ def _brief(row: Any) -> dict[str, Any]:
     return {k: getattr(row, k) for k in keys}
 
 
-register_configs()
+register_configs(Path(__file__).resolve().parents[1] / "conf")
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="evaluate")

@@ -28,7 +28,7 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.agents import make_agent_for_env
+from evcd.agents import agent_class, make_agent_for_env
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.params import agent_params, config_days, env_kwargs, fleet_kwargs, learner_config
 from evcd.cli.run_record import write_run_record
@@ -38,7 +38,7 @@ from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.fleet_train import FleetTrainSettings, train_and_evaluate_fleet
-from evcd.loops.hindsight import DISPATCHERS, dispatcher_learns, make_dispatcher
+from evcd.loops.hindsight import dispatcher_learns, dispatcher_names, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng, days_of_seed
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
@@ -167,9 +167,10 @@ def check_rule(name: Any, key: str) -> str:
     Raises:
         ValueError: naming ``key``, the value and the rules allowed there.
     """
-    rules = [d for d in DISPATCHERS if not dispatcher_learns(d)]
+    known = dispatcher_names()
+    rules = [d for d in known if not dispatcher_learns(d)]
     if name not in rules:
-        kind = "a learner, not a rule" if name in DISPATCHERS else "not a rule"
+        kind = "a learner, not a rule" if name in known else "not a rule"
         raise ValueError(f"{key}: {name!r} is {kind}; the rules: {', '.join(rules)}")
     return str(name)
 
@@ -209,7 +210,7 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
     if params.pop("checkpoint", None) is not None:
         raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
                          "resume=true with its hydra.run.dir")  # fmt: skip
-    if learns:
+    if agent_class(name).learner_block:
         params["config"] = learner_config(cfg.learner)
     base = fleet_kwargs(cfg)  # refuses the single target's options
     envs = {
@@ -344,7 +345,7 @@ def _day_mean(rows: Any, day: int) -> float:
     return sum(charged) / len(charged) if charged else float("nan")
 
 
-register_configs()
+register_configs(Path(__file__).resolve().parents[1] / "conf")
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="train")

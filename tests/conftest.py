@@ -294,7 +294,7 @@ def run_script(
 
 def compose_config(config_name: str, *overrides: str, return_hydra_config: bool = False) -> DictConfig:
     """The config a script composes (``train``, ``evaluate``, ``inspect``) with ``overrides``."""
-    register_configs()
+    register_configs(CONF)
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         return compose(config_name, overrides=list(overrides), return_hydra_config=return_hydra_config)
 

@@ -9,19 +9,16 @@ episodes themselves (the runners of :mod:`evcd.env.runners` do, and the loops of
 drive them; the best station in hindsight, a bound rather than a policy, is
 :mod:`evcd.loops.hindsight`).
 
-The registry maps a name to a class path (imported on first use, so that the heuristics do not pay
-for torch) and to the defaults that name implies: ``dqn`` and ``dueling_ddqn`` are the one
-:class:`~evcd.agents.dqn.DQNAgent` with its two switches off or on.
-
-Two registered rules need the fleet's observation ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`,
-:mod:`evcd.agents.fleet_rules`): ``reservation`` and ``central``. :data:`AGENT_NAMES` lists the
-dispatchers of the single environment (each has its ``conf/agent/<name>.yaml``), which the fleet-only
-rules are not; :data:`FLEET_AGENT_NAMES` lists the agents that take the fleet's observation.
+The registry (:mod:`evcd.agents.registry`) maps a name to a class and to the defaults that name
+implies: ``dqn`` and ``dueling_ddqn`` are the one :class:`~evcd.agents.dqn.DQNAgent` with its two
+switches off or on. Other packages add agents with :func:`register_agent` or an entry point in the
+group ``evcd.agents``; the tasks an agent takes are the observation layouts it declares
+(:func:`agent_names`: ``"single"``, ``[D, N, Z]``; ``"fleet"``, ``[D, N, Z, H]``, which only the
+fleet's rules ``reservation`` and ``central`` read alone).
 """
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 import numpy as np
@@ -32,51 +29,21 @@ from evcd.agents.base import (
     EpisodeState,
     Transition,
     observation_blocks,
+    observation_layout,
     observation_units,
     split_observation,
 )
-
-#: Agent name -> (``module:Class``, the constructor arguments that name implies).
-_REGISTRY: dict[str, tuple[str, dict[str, Any]]] = {
-    "random": ("evcd.agents.heuristics:RandomAgent", {}),
-    "greedy": ("evcd.agents.heuristics:GreedyAgent", {}),
-    "queue_aware": ("evcd.agents.heuristics:QueueAwareAgent", {}),
-    "dqn": ("evcd.agents.dqn:DQNAgent", {"double": False, "dueling": False}),
-    "dueling_ddqn": ("evcd.agents.dqn:DQNAgent", {"double": True, "dueling": True}),
-    "reservation": ("evcd.agents.fleet_rules:ReservationAgent", {}),
-    "central": ("evcd.agents.fleet_rules:CentralAgent", {}),
-}
-#: The registered agents that read only the fleet's observation ``[D, N, Z, H]``.
-_FLEET_ONLY: tuple[str, ...] = ("reservation", "central")
-#: The dispatchers of the single environment (``[D, N, Z]``; each has ``conf/agent/<name>.yaml``).
-AGENT_NAMES: tuple[str, ...] = tuple(name for name in _REGISTRY if name not in _FLEET_ONLY)
-#: The agents that take the fleet's observation ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`).
-FLEET_AGENT_NAMES: tuple[str, ...] = ("random", "greedy", "queue_aware", *_FLEET_ONLY)
-
-
-def agent_class(name: str) -> type[Agent]:
-    """The agent class registered as ``name``.
-
-    Raises:
-        ValueError: ``name`` is not registered (the message lists the registered names).
-    """
-    if name not in _REGISTRY:
-        raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(_REGISTRY)}")
-    module, _, cls_name = _REGISTRY[name][0].partition(":")
-    return getattr(importlib.import_module(module), cls_name)
-
-
-def agent_defaults(name: str) -> dict[str, Any]:
-    """The constructor arguments the name ``name`` implies (e.g. ``dueling_ddqn``: both switches on)."""
-    agent_class(name)
-    return dict(_REGISTRY[name][1])
-
-
-def _check_kwargs(cls: type[Agent], name: str, kwargs: dict[str, Any]) -> None:
-    params = cls.option_names()
-    unknown = sorted(set(kwargs) - set(params))
-    if unknown:
-        raise ValueError(f"agent {name!r}: unknown options {unknown}; it takes {params or 'none'}")
+from evcd.agents.registry import (
+    ENTRY_POINT_GROUP,
+    TASK_BLOCKS,
+    agent_class,
+    agent_defaults,
+    agent_names,
+    check_agent_task,
+    check_options,
+    register_agent,
+    unregister_agent,
+)
 
 
 def make_agent(name: str, n_stations: int, rng: np.random.Generator, **kwargs: Any) -> Agent:
@@ -86,7 +53,7 @@ def make_agent(name: str, n_stations: int, rng: np.random.Generator, **kwargs: A
         ValueError: unknown agent or option, or a bad value (each message names it).
     """
     cls = agent_class(name)
-    _check_kwargs(cls, name, kwargs)
+    check_options(cls, name, kwargs)
     return cls(n_stations, rng, **{**agent_defaults(name), **kwargs})
 
 
@@ -94,22 +61,27 @@ def make_agent_for_env(name: str, env: Any, rng: np.random.Generator, **kwargs: 
     """:func:`make_agent` with the number of stations and the settings the agent needs read off
     ``env`` (a :class:`~evcd.env.ChargingNavEnv`, wrapped or not); ``kwargs`` override them."""
     cls = agent_class(name)
-    _check_kwargs(cls, name, kwargs)
+    check_options(cls, name, kwargs)
     return cls.from_env(env, rng, **{**agent_defaults(name), **kwargs})
 
 
 __all__ = [
-    "AGENT_NAMES",
-    "FLEET_AGENT_NAMES",
+    "ENTRY_POINT_GROUP",
     "OBSERVATION_LAYOUTS",
+    "TASK_BLOCKS",
     "Agent",
     "EpisodeState",
     "Transition",
     "agent_class",
     "agent_defaults",
+    "agent_names",
+    "check_agent_task",
     "make_agent",
     "make_agent_for_env",
     "observation_blocks",
+    "observation_layout",
     "observation_units",
+    "register_agent",
     "split_observation",
+    "unregister_agent",
 ]

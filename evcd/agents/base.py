@@ -11,16 +11,33 @@ one episode at a time, as with a Gymnasium environment:
     agent.begin_episode(rng)              # after env.reset(): a new episode state
     action = agent.act(obs, explore)      # once per decision slot: decide() on that one episode
     agent.observe(Transition(...))        # learning agents only: after every env.step()
+    agent.end_episode()                   # learning agents only: after the episode's last step
 
 Every source of randomness is a ``numpy.random.Generator`` handed in (at construction, and per
 episode), never the global one, so a run is reproducible from its seed.
+
+What the loops need of an agent is all declared here, with defaults that fit a rule, so that an
+agent written outside evcd (registered with :func:`evcd.agents.register_agent` or an entry point)
+trains, checkpoints, resumes and is evaluated like evcd's own:
+
+- acting: :meth:`Agent.new_episode`, :meth:`Agent.decide`;
+- learning (``learns = True``): :meth:`Agent.observe` on every transition of an episode, then
+  :meth:`Agent.end_episode` once it ended (an on-policy learner learns from whole episodes there;
+  an episode that ended where its target could no longer be observed gets no last transition);
+- checkpoints: :meth:`Agent.state_dict` (everything a resumed run needs) and
+  :meth:`Agent.policy_state_dict` (what decides), loaded back exactly by
+  :meth:`Agent.load_state_dict`; :meth:`Agent.checkpoint_options` rebuilds an agent that fits a
+  saved policy (``scripts/evaluate.py agent.checkpoint=...``);
+- logs: :meth:`Agent.stats` (counters for ``results.json``) and :meth:`Agent.scalars` (TensorBoard);
+- configuration: :attr:`Agent.options` (its Hydra block ``agent.*``, with defaults),
+  :attr:`Agent.env_options` (read off the environment by :meth:`Agent.env_kwargs`), and
+  :attr:`Agent.obs_blocks` (the tasks it takes).
 """
 
 from __future__ import annotations
 
-import inspect
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
 
@@ -125,17 +142,27 @@ class Agent(ABC):
             generator of their own draw from it.
 
     Subclasses set :attr:`name` (the registry key, see :func:`evcd.agents.make_agent`) and implement
-    :meth:`decide`; learning agents also override :meth:`observe`. Agents that read the fleet's
-    observation set :attr:`obs_blocks`.
+    :meth:`decide`; learning agents also override :meth:`observe` (and :meth:`end_episode`) and the
+    checkpoint methods. Agents that read the fleet's observation set :attr:`obs_blocks`; agents with
+    options declare them in :attr:`options`.
     """
 
     name: ClassVar[str]
     #: Whether the agent learns from :meth:`observe` (the trainer runs a training phase for it).
     learns: ClassVar[bool] = False
     #: The observation layouts :meth:`decide` accepts, as block counts (:data:`OBSERVATION_LAYOUTS`):
-    #: 3, the single environment's ``[D, N, Z]``; 4, the fleet's ``[D, N, Z, H]``. Which one a call
-    #: holds is read off its size (:meth:`blocks_of`).
+    #: 3, the single environment's ``[D, N, Z]`` (``task=single``); 4, the fleet's ``[D, N, Z, H]``
+    #: (``task=fleet``). Which one a call holds is read off its size (:meth:`blocks_of`).
     obs_blocks: ClassVar[tuple[int, ...]] = (3,)
+    #: The options a user sets, beyond ``n_stations`` and ``rng``, with their defaults: the agent's
+    #: Hydra block ``agent.*`` (where ``conf/agent`` has no file of its name, evcd makes the block
+    #: from this) and what :func:`~evcd.agents.make_agent` accepts (:meth:`option_names`).
+    options: ClassVar[Mapping[str, Any]] = {}
+    #: The constructor arguments :meth:`env_kwargs` reads off an environment (accepted as options too).
+    env_options: ClassVar[tuple[str, ...]] = ()
+    #: Whether the constructor takes ``config``, the run's ``learner`` block
+    #: (:class:`~evcd.agents.dqn_config.DQNConfig`: the DQN learners' hyperparameters).
+    learner_block: ClassVar[bool] = False
 
     def __init__(self, n_stations: int, rng: np.random.Generator) -> None:
         self.n_stations = check_int("n_stations", n_stations, minimum=1)
@@ -157,18 +184,10 @@ class Agent(ABC):
 
     @classmethod
     def option_names(cls) -> list[str]:
-        """The options the constructor takes beyond ``n_stations`` and ``rng`` (for the registry's
-        check of unknown options): its named parameters, and where it passes ``**kwargs`` on to its
-        parent's constructor, the parent's too."""
-        names: list[str] = []
-        for klass in cls.__mro__:
-            if "__init__" not in vars(klass):
-                continue
-            params = list(inspect.signature(vars(klass)["__init__"]).parameters.values())[3:]
-            names += [p.name for p in params if p.kind is not p.VAR_KEYWORD and p.name not in names]
-            if not any(p.kind is p.VAR_KEYWORD for p in params):
-                break
-        return names
+        """The options the constructor takes beyond ``n_stations`` and ``rng``, as declared:
+        :attr:`options`, :attr:`env_options`, and ``config`` where it takes the ``learner`` block."""
+        names = [*cls.options, *(n for n in cls.env_options if n not in cls.options)]
+        return [*names, "config"] if cls.learner_block else names
 
     @classmethod
     def from_env(cls, env: Any, rng: np.random.Generator, **kwargs: Any) -> Self:
@@ -227,8 +246,58 @@ class Agent(ABC):
         """Learning hook, called after every step of ``episode`` (default: the current one) while
         training; the rules ignore it."""
 
+    def end_episode(self, episode: EpisodeState | None = None) -> None:  # noqa: B027
+        """Learning hook, called once ``episode`` (default: the current one) ended, after its last
+        :meth:`observe`, while training: an on-policy learner completes its rollout here. An episode
+        whose target could no longer be observed (it vanished or teleported, was never inserted, or
+        SUMO failed: :data:`evcd.env.episode_rules.UNOBSERVED`) ends without a last transition, so
+        the transitions observed hold only true next observations. The rules ignore it."""
+
     def stats(self) -> dict[str, float]:
-        """Learning statistics for logs (cumulative counters and current schedules); none here."""
+        """Learning statistics for ``results.json`` and logs (cumulative counters such as
+        ``transitions`` and ``gradient_steps``, and current schedules); none here."""
+        return {}
+
+    def scalars(self) -> dict[str, float]:
+        """TensorBoard scalars by tag (e.g. ``losses/policy``), logged after every training episode
+        beside the trainer's own; none here."""
+        return {}
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict[str, Any]:
+        """Everything that determines the agent's future (a snapshot: later decisions or learning
+        do not change it); a rule's is its generator."""
+        return {"format": f"evcd.agent/{self.name}", "rng": self.rng.bit_generator.state}
+
+    def policy_state_dict(self) -> dict[str, Any]:
+        """The part of :meth:`state_dict` that decides (a learner's networks, without its optimiser or
+        replay), read by ``load_state_dict(..., policy_only=True)``; a rule's has nothing to load."""
+        return {"format": f"evcd.agent/{self.name}"}
+
+    def load_state_dict(self, state: Mapping[str, Any], policy_only: bool = False) -> None:
+        """Restore :meth:`state_dict` (``policy_only``: just :meth:`policy_state_dict`'s part).
+
+        Raises:
+            CheckpointError: ``state`` is not this agent's.
+        """
+        from evcd.utils.checkpoint import CheckpointError  # torch: only where checkpoints are loaded
+
+        expected = f"evcd.agent/{self.name}"
+        if not isinstance(state, Mapping) or state.get("format") != expected:
+            found = state.get("format") if isinstance(state, Mapping) else type(state).__name__
+            raise CheckpointError(f"the checkpoint holds {found!r}, not a {self.name!r} agent ({expected!r})")
+        if not policy_only:
+            self.rng.bit_generator.state = state["rng"]
+
+    @classmethod
+    def checkpoint_options(cls, policy: Mapping[str, Any]) -> dict[str, Any]:
+        """The constructor options a saved :meth:`policy_state_dict` implies (its network's sizes),
+        so that an agent built with them loads it; none here.
+
+        Raises:
+            CheckpointError: ``policy`` is not a policy of this class.
+        """
+        del policy
         return {}
 
     def __repr__(self) -> str:

@@ -30,10 +30,10 @@ from __future__ import annotations
 import copy
 import dataclasses
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -49,11 +49,11 @@ from evcd.agents.base import (
 )
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
 from evcd.agents.dqn_episode import DQNEpisode
-from evcd.agents.dqn_state import STATE_FORMAT, check_policy_state
+from evcd.agents.dqn_state import STATE_FORMAT, check_policy_state, policy_settings
 from evcd.agents.in_turn import hold, learner_tick
+from evcd.agents.inputs import input_factor, observation_divisors
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
-from evcd.env.observation import unit_divisors
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
 from evcd.utils.validation import check_bool
 
@@ -81,6 +81,9 @@ class DQNAgent(Agent):
 
     learns = True
     obs_blocks = (3, 4)
+    options: ClassVar[Mapping[str, Any]] = {"double": False, "dueling": False, "checkpoint": None}
+    env_options = ("points", "normalized", "obs_blocks")
+    learner_block = True
 
     def __init__(
         self,
@@ -116,7 +119,7 @@ class DQNAgent(Agent):
                 "environment has one EV (in_turn=false)"
             )
         self.normalized = check_bool("normalized", normalized)
-        self._divisors = self._observation_divisors(points)
+        self._divisors = observation_divisors(points, self.n_stations, self.blocks, self.normalized)
         m = self.n_stations
         #: one vehicle in the observation's Z and H units (in_turn's corrections)
         self._vehicle = 1.0 / self._divisors[-m:] if self.normalized else np.ones(m)
@@ -153,27 +156,24 @@ class DQNAgent(Agent):
 
     @classmethod
     def option_names(cls) -> list[str]:
-        """The constructor's options and every hyperparameter of :class:`DQNConfig`."""
-        return [n for n in super().option_names() if n != "hyperparameters"] + list(DQNConfig.field_names())
+        """The declared options (:attr:`options`, :attr:`env_options`, ``config``) and every
+        hyperparameter of :class:`DQNConfig` (given as keywords, they replace fields of ``config``)."""
+        return [*super().option_names(), *DQNConfig.field_names()]
 
-    def _observation_divisors(self, points: int | Sequence[int] | None) -> np.ndarray:
-        """What the environment's observation units are worth in physical ones (float64, ``3m``)."""
-        if points is None:
-            if self.normalized:
-                raise ValueError("normalized=True needs the stations' charging points (points=...), to "
-                                 "read Z in vehicles")  # fmt: skip
-            return np.ones(self.obs_dim)
-        pts = np.broadcast_to(np.asarray(points), (self.n_stations,)) if np.ndim(points) == 0 else (
-            np.asarray(points))  # fmt: skip
-        if pts.shape != (self.n_stations,) or not np.issubdtype(pts.dtype, np.integer) or (pts < 1).any():
-            raise ValueError(f"points={points!r}: must be an integer >= 1 or {self.n_stations} of them")
-        return unit_divisors(pts, self.blocks)
+    @classmethod
+    def checkpoint_options(cls, policy: Mapping[str, Any]) -> dict[str, Any]:
+        """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of a saved policy and
+        how it decides a fleet tick (``in_turn``).
+
+        Raises:
+            CheckpointError: ``policy`` is not a DQN agent's.
+        """
+        return policy_settings(policy)
 
     def _set_input_scale(self, scale: np.ndarray) -> None:
         """Take ``scale`` (physical -> network) and derive the factor applied to observations."""
         self.input_scale = np.asarray(scale, np.float32)
-        units = self._divisors if self.normalized else np.ones(self.obs_dim)
-        self._obs_to_input = (self.input_scale.astype(np.float64) * units).astype(np.float32)
+        self._obs_to_input = input_factor(self.input_scale, self._divisors, self.normalized)
 
     def __repr__(self) -> str:
         c = self.config
@@ -258,6 +258,18 @@ class DQNAgent(Agent):
         if self.steps >= max(c.learning_starts, 1) and self.steps % c.train_freq == 0 and len(self.replay):
             for _ in range(c.gradient_steps):
                 self.learn()
+
+    def end_episode(self, episode: DQNEpisode | None = None) -> None:  # type: ignore[override]
+        """``episode`` ended. After a last transition nothing is left to store; an episode that ended
+        without one (its target could no longer be observed) stores what it holds: with ``in_turn``
+        its transition waiting for a next decision (with the next observation it had), and its
+        pending n-step windows, each bootstrapping from the last true observation."""
+        ep = self.episode if episode is None else episode
+        if ep.held is not None:
+            held, ep.held = ep.held, None
+            self._push(held, ep)
+        for window in ep.flush():
+            self._store(window)
 
     def _push(self, transition: Transition, episode: DQNEpisode) -> None:
         """Into the replay, through ``episode``'s n-step window."""
@@ -384,7 +396,7 @@ class DQNAgent(Agent):
             "target": copy.deepcopy(self.target.state_dict()),
         }
 
-    def load_state_dict(self, state: dict[str, Any], policy_only: bool = False) -> None:
+    def load_state_dict(self, state: Mapping[str, Any], policy_only: bool = False) -> None:  # type: ignore[override]
         """Restore :meth:`state_dict` (``policy_only``: just the networks and their input scale).
 
         The checkpoint's input scale replaces this agent's: the network keeps seeing what it was

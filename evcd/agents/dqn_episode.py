@@ -63,3 +63,12 @@ class DQNEpisode(EpisodeState):
                 out.append(tuple(pending))
                 pending.popleft()
         return out
+
+    def flush(self) -> list[tuple[Transition, ...]]:
+        """The windows still pending when the episode ended without a last transition (its target
+        could no longer be observed): each is stored bootstrapping from the last true observation."""
+        out = []
+        while self.pending:
+            out.append(tuple(self.pending))
+            self.pending.popleft()
+        return out

@@ -8,6 +8,7 @@ what it holds without building anything.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -56,17 +57,28 @@ def check_policy_state(
 
 
 def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
-    """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of the agent saved in a
-    checkpoint and how it decides a fleet tick (``in_turn``), so that a policy can be rebuilt to load
-    it and act as it was trained.
+    """:func:`policy_settings` of the agent saved in a checkpoint (a file or a run directory).
 
     Raises:
         CheckpointError: the file is not a DQN checkpoint (or is damaged).
     """
     state = load_checkpoint(path)
-    agent = state.get("agent", state)
-    if not isinstance(agent, dict) or agent.get("format") != STATE_FORMAT:
-        raise CheckpointError(f"checkpoint {str(path)!r} does not hold a DQN agent")
+    try:
+        return policy_settings(state.get("agent", state))
+    except CheckpointError as exc:
+        raise CheckpointError(f"checkpoint {str(path)!r} does not hold a DQN agent") from exc
+
+
+def policy_settings(agent: Any) -> dict[str, Any]:
+    """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of a saved DQN policy
+    and how it decides a fleet tick (``in_turn``), so that a policy can be rebuilt to load it and act
+    as it was trained.
+
+    Raises:
+        CheckpointError: ``agent`` is not a DQN agent's state.
+    """
+    if not isinstance(agent, Mapping) or agent.get("format") != STATE_FORMAT:
+        raise CheckpointError("the checkpoint does not hold a DQN agent")
     saved = _network_settings(agent["config"])
     return {
         "hidden": tuple(saved["hidden"]),

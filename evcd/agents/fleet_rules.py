@@ -19,9 +19,9 @@ sooner. EVs that count each other can move away from a station together and back
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -55,6 +55,7 @@ class ReservationAgent(QueueAwareAgent):
 
     name = "reservation"
     obs_blocks = (4,)
+    options: ClassVar[Mapping[str, Any]] = {**QueueAwareAgent.options, "switch_margin_s": 0.0}
 
     def __init__(
         self, n_stations: int, rng: np.random.Generator, switch_margin_s: float = 0.0, **kwargs: Any

@@ -13,9 +13,9 @@ whether it normalises).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -95,6 +95,8 @@ class QueueAwareAgent(Agent):
 
     name = "queue_aware"
     obs_blocks = (3, 4)
+    options: ClassVar[Mapping[str, Any]] = {"speed_mps": 10.0, "vehicle_delay_s": 2.0, "charge_s": 1350.0}
+    env_options = ("points", "normalized")
 
     def __init__(
         self,
@@ -169,6 +171,7 @@ class FixedStationAgent(Agent):
 
     name = "fixed"
     obs_blocks = (3, 4)
+    options: ClassVar[Mapping[str, Any]] = {"station": 0}
 
     def __init__(self, n_stations: int, rng: np.random.Generator, station: int = 0) -> None:
         super().__init__(n_stations, rng)

@@ -15,6 +15,7 @@ from typing import Any
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
+from evcd.agents import agent_class
 from evcd.agents.dqn_config import DQNConfig
 from evcd.loops.hindsight import check_dispatcher, dispatcher_learns
 from evcd.scenario.demand import DemandConfig
@@ -80,8 +81,9 @@ def fleet_kwargs(cfg: DictConfig) -> dict[str, Any]:
 
 
 def agent_params(cfg: DictConfig) -> tuple[str, dict[str, Any]]:
-    """The dispatcher's name and constructor arguments from ``agent``; a learning agent also gets
-    ``config``, the :class:`~evcd.agents.dqn_config.DQNConfig` of the top-level ``learner`` block.
+    """The dispatcher's name and constructor arguments from ``agent``; a learner that takes the
+    ``learner`` block (:attr:`~evcd.agents.Agent.learner_block`: the DQN learners) also gets ``config``,
+    the :class:`~evcd.agents.dqn_config.DQNConfig` of the top-level ``learner`` block.
 
     Raises:
         ValueError: the name is unknown (the message lists the known ones), or a learner value is out
@@ -90,7 +92,7 @@ def agent_params(cfg: DictConfig) -> tuple[str, dict[str, Any]]:
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = check_dispatcher(params.pop("name"))
     learner = OmegaConf.select(cfg, "learner")
-    if dispatcher_learns(name) and learner is not None:
+    if dispatcher_learns(name) and agent_class(name).learner_block and learner is not None:
         params["config"] = learner_config(learner)
     return name, params
 
@@ -125,6 +127,6 @@ def compose_train(conf_dir: str | Path, *overrides: str) -> DictConfig:
 
     from evcd.cli.schema import register_configs
 
-    register_configs()
+    register_configs(conf_dir)
     with initialize_config_dir(config_dir=str(Path(conf_dir).resolve()), version_base="1.3"):
         return compose("train", overrides=list(overrides))

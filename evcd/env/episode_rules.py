@@ -35,6 +35,11 @@ MAX_INSERT_TRIES = 5
 TIME_EPS = 1e-9
 #: Why an episode ends: the target started charging, or one of the truncations.
 REASONS = ("charging", "teleported", "vanished", "stuck", "max_travel_time", "sumo_error", "not_inserted")
+#: The ends where the target can no longer be observed: its last slot has no true next observation,
+#: so the runners hand learners no transition for it (the episode ends with ``agent.end_episode``
+#: alone). Bootstrapping from the observation before the slot would mislabel the state, and cutting
+#: the bootstrap would make an abort look like the end of all cost (a teleport would pay).
+UNOBSERVED = ("teleported", "vanished", "sumo_error", "not_inserted")
 
 
 @dataclass

@@ -16,6 +16,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from evcd.agents.base import Agent
 from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings
 from evcd.utils.checkpoint import CheckpointError, has_checkpoint, load_checkpoint, save_checkpoint
 
@@ -26,7 +27,7 @@ BEST_DIR = "best"
 BEST_FORMAT = "evcd.best_policy/1"
 
 
-def keep_if_best(run_dir: Path, agent: Any, settings: ValidationSettings, record: ValidationRecord) -> bool:
+def keep_if_best(run_dir: Path, agent: Agent, settings: ValidationSettings, record: ValidationRecord) -> bool:
     """After a validation: with ``settings.select_best``, save ``agent``'s policy as the run's best
     if the latest validation point is the best one.
 
@@ -44,7 +45,7 @@ def keep_if_best(run_dir: Path, agent: Any, settings: ValidationSettings, record
     return True
 
 
-def load_best(run_dir: Path, agent: Any, record: ValidationRecord) -> ValidationPoint:
+def load_best(run_dir: Path, agent: Agent, record: ValidationRecord) -> ValidationPoint:
     """Load the policy of ``record``'s best validation into ``agent`` (its networks only).
 
     Raises:
@@ -91,9 +92,14 @@ def check_learned(agent: Any, episodes: int) -> None:
         return
     stats = agent.stats()
     if stats.get("gradient_steps", 1) == 0:
-        starts = getattr(getattr(agent, "config", None), "learning_starts", "?")
+        config = getattr(agent, "config", None)
+        starts = getattr(config, "learning_starts", None)
+        rollout = getattr(config, "rollout_steps", None)
+        needs = f"learner.learning_starts={starts}" if starts is not None else "its own threshold"
+        if rollout is not None:
+            needs = f"agent.rollout_steps={rollout}"
         seen = int(stats.get("transitions", 0))
         raise ValueError(f"the learner took no gradient step in {episodes} training episodes "
-                         f"({seen} transitions, learner.learning_starts={starts}): "
-                         "its network is untrained, so it is not evaluated; lower learning_starts or "
+                         f"({seen} transitions, {needs}): "
+                         "its network is untrained, so it is not evaluated; lower that setting or "
                          "train longer (the checkpoint is kept)")  # fmt: skip

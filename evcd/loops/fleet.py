@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from evcd.agents import FLEET_AGENT_NAMES, agent_class
+from evcd.agents import agent_names, check_agent_task
+from evcd.env.episode_rules import UNOBSERVED
 from evcd.env.fleet import FleetEnv
 from evcd.env.fleet.measures import FleetMeasures
 from evcd.env.runners.base import EpisodeSpec, Policy
@@ -106,17 +107,20 @@ def play_fleet(
         batch = np.stack([obs[a] for a in due])
         actions = agent.decide(batch, [states[a] for a in due], explore)
         chosen = {a: int(x) for a, x in zip(due, actions, strict=True)}
-        next_obs, rewards, terms, truncs, _ = env.step(chosen)
+        next_obs, rewards, terms, truncs, infos = env.step(chosen)
         transitions += len(due)
         admit([a for a in next_obs if a not in states])
         for a, r in rewards.items():
             returns[a] += r
         if learn:
             for a in due:
-                step = Transition(
-                    obs[a], chosen[a], float(rewards[a]), next_obs[a], bool(terms[a]), bool(truncs[a])
-                )
-                agent.observe(step, states[a])
+                ended = bool(terms[a]) or bool(truncs[a])
+                if not (truncs[a] and infos[a].get("reason") in UNOBSERVED):
+                    step = Transition(obs[a], chosen[a], float(rewards[a]), next_obs[a], bool(terms[a]),
+                                      bool(truncs[a]))  # fmt: skip
+                    agent.observe(step, states[a])
+                if ended:
+                    agent.end_episode(states[a])
         obs = next_obs
     day = env.days[env.day].demand_seed if env.day is not None else -1
     return FleetEpisode(spec.index, day, env.measures(), returns, transitions,
@@ -139,28 +143,23 @@ def train_fleet(
     return played
 
 
-#: The dispatchers the fleet takes: the rules reading ``[D, N, Z]`` or ``[D, N, Z, H]``, and the learners
-#: (one network shared by every guided EV, trained by :mod:`evcd.loops.fleet_train`).
-FLEET_DISPATCHERS: tuple[str, ...] = (*FLEET_AGENT_NAMES, "dqn", "dueling_ddqn")
-
-
 def check_fleet_dispatcher(name: Any) -> str:
-    """``name`` if the fleet can be given it.
+    """``name`` if the fleet can be given it: a registered agent that reads ``[D, N, Z, H]`` (the
+    rules, and the learners: one network shared by every guided EV).
 
     Raises:
         ValueError: not a fleet dispatcher (the message lists them).
     """
-    if name not in FLEET_DISPATCHERS:
-        raise ValueError(
-            f"agent {name!r} is not a fleet dispatcher (task=fleet); "
-            f"the fleet takes: {', '.join(FLEET_DISPATCHERS)}"
-        )
+    if name not in agent_names():
+        raise ValueError(f"agent {name!r} is not a fleet dispatcher (task=fleet); "
+                         f"the fleet takes: {', '.join(agent_names('fleet'))}")  # fmt: skip
+    check_agent_task(str(name), "fleet")
     return str(name)
 
 
 def fleet_dispatcher_learns(name: Any) -> bool:
     """Whether the fleet dispatcher ``name`` learns (``ValueError`` if the fleet does not take it)."""
-    return agent_class(check_fleet_dispatcher(name)).learns
+    return check_agent_task(check_fleet_dispatcher(name), "fleet").learns
 
 
 def evaluate_fleet(

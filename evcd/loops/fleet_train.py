@@ -225,7 +225,9 @@ def _train(
             state.episodes_done += 1
             state.transitions += ep.transitions
             state.wall_s += ep.wall_s
-            tlog.fleet_episode(state.rows[-1], agent.stats(), state.transitions, state.wall_s)
+            tlog.fleet_episode(
+                state.rows[-1], agent.stats(), state.transitions, state.wall_s, agent.scalars()
+            )
             bar.set_postfix(guided=f"{ep.measures.guided_travel:.0f}s", refresh=False)
             bar.update(1)
             done = state.episodes_done

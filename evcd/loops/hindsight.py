@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from evcd.agents import AGENT_NAMES, FLEET_AGENT_NAMES, Agent, agent_class, make_agent_for_env
+from evcd.agents import Agent, agent_class, agent_names, make_agent_for_env
 from evcd.agents.heuristics import FixedStationAgent
 from evcd.env.runners import EpisodeRow, EpisodeRunner, EpisodeSpec
 from evcd.utils.validation import check_int
@@ -107,8 +107,10 @@ class HindsightBound:
         }
 
 
-#: The names a run can be given: the agents and the hindsight bound.
-DISPATCHERS: tuple[str, ...] = (*AGENT_NAMES, HindsightBound.name)
+def dispatcher_names() -> tuple[str, ...]:
+    """The names a single-target run can be given: the registered agents that read ``[D, N, Z]``
+    (outside packages' included) and the hindsight bound."""
+    return (*agent_names("single"), HindsightBound.name)
 
 
 def make_dispatcher(name: str, env: Any, rng: np.random.Generator, **params: Any) -> Agent | HindsightBound:
@@ -131,10 +133,13 @@ def check_dispatcher(name: Any) -> str:
     Raises:
         ValueError: an unknown name (the message lists the known ones).
     """
-    if name in FLEET_AGENT_NAMES and name not in DISPATCHERS:
+    if name == HindsightBound.name:
+        return name
+    known = dispatcher_names()
+    if name in agent_names() and name not in known:
         raise ValueError(f"agent {name!r} reads the fleet's observation [D, N, Z, H]: use it with task=fleet")
-    if name not in DISPATCHERS:
-        raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(DISPATCHERS)}")
+    if name not in known:
+        raise ValueError(f"agent {name!r} is unknown; known agents: {', '.join(known)}")
     return str(name)
 
 

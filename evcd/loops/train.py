@@ -162,7 +162,7 @@ def _train(
             state.transitions += row.steps
             paused = state.validation_s - validation_before
             state.wall_s = wall_before + time.perf_counter() - session_start - paused
-            tlog.episode(row, agent.stats(), state.transitions, state.wall_s)
+            tlog.episode(row, agent.stats(), state.transitions, state.wall_s, agent.scalars())
             bar(row)
 
         while state.episodes_done < settings.episodes:

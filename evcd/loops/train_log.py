@@ -6,7 +6,10 @@ interrupted one wrote after its last checkpoint):
 - ``charts/travel_time``, ``charts/episodic_return``, ``charts/queue_wait``, ``charts/switches``,
   ``charts/truncated`` (per training episode), ``charts/epsilon``, ``charts/learning_rate``,
   ``charts/transitions_per_second``;
-- ``losses/td_loss`` and ``losses/q_values``: means over the gradient steps of the episode;
+- ``losses/td_loss`` and ``losses/q_values``: means over the gradient steps of the episode (the DQN
+  learners); an agent's own :meth:`~evcd.agents.Agent.scalars` under their tags (PPO:
+  ``losses/policy``, ``losses/value``, ``losses/entropy``, ``charts/approx_kl``,
+  ``charts/clip_fraction``);
 - ``eval/travel_time`` (the agent), and per baseline rule ``eval/<rule>_travel_time`` and
   ``eval/paired_difference_<rule>`` (agent minus rule on the same episodes);
 - the periodic held-out validation (:mod:`evcd.loops.validation`): ``eval/validation_travel_time``
@@ -58,28 +61,46 @@ class TrainLog:
     def _read(stats: Mapping[str, float]) -> tuple[float, float, float]:
         return (stats.get("gradient_steps", 0.0), stats.get("loss_total", 0.0), stats.get("q_total", 0.0))
 
-    def episode(self, row: EpisodeRow, stats: Mapping[str, float], step: int, wall_s: float) -> None:
-        """Log one training episode (``stats``: the agent's :meth:`~evcd.agents.Agent.stats` after it)."""
+    def episode(
+        self,
+        row: EpisodeRow,
+        stats: Mapping[str, float],
+        step: int,
+        wall_s: float,
+        scalars: Mapping[str, float] | None = None,
+    ) -> None:
+        """Log one training episode (``stats`` and ``scalars``: the agent's
+        :meth:`~evcd.agents.Agent.stats` and :meth:`~evcd.agents.Agent.scalars` after it)."""
         w = self.writer
         w.add_scalar("charts/travel_time", row.travel_time, step)
         w.add_scalar("charts/episodic_return", row.episode_return, step)
         w.add_scalar("charts/queue_wait", row.queue_wait, step)
         w.add_scalar("charts/switches", row.switches, step)
         w.add_scalar("charts/truncated", float(row.truncated), step)
-        self._learner(stats, step, wall_s)
+        self._learner(stats, step, wall_s, scalars)
 
     def fleet_episode(
-        self, row: Mapping[str, Any], stats: Mapping[str, float], step: int, wall_s: float
+        self,
+        row: Mapping[str, Any],
+        stats: Mapping[str, float],
+        step: int,
+        wall_s: float,
+        scalars: Mapping[str, float] | None = None,
     ) -> None:
         """Log one training fleet episode (``row``: :meth:`~evcd.loops.fleet.FleetEpisode.row`)."""
         for key in ("guided_travel", "all_travel", "queue_wait", "herding", "switches", "truncated"):
             value = float(row[key])
             if math.isfinite(value):
                 self.writer.add_scalar(f"charts/{key}", value, step)
-        self._learner(stats, step, wall_s)
+        self._learner(stats, step, wall_s, scalars)
 
-    def _learner(self, stats: Mapping[str, float], step: int, wall_s: float) -> None:
-        """Exploration, speed and the losses over the gradient steps since the last call."""
+    def _learner(
+        self, stats: Mapping[str, float], step: int, wall_s: float, scalars: Mapping[str, float] | None
+    ) -> None:
+        """Exploration, speed, the losses over the gradient steps since the last call (an agent
+        counting ``loss_total``: the DQN learners) and the agent's own scalars."""
+        for tag, value in (scalars or {}).items():
+            self.writer.add_scalar(tag, value, step)
         w = self.writer
         if "epsilon" in stats:
             w.add_scalar("charts/epsilon", stats["epsilon"], step)
@@ -90,7 +111,7 @@ class TrainLog:
         now = self._read(stats)
         before = self._totals if self._totals is not None else now
         steps = now[0] - before[0]
-        if steps > 0:
+        if steps > 0 and "loss_total" in stats:
             w.add_scalar("losses/td_loss", (now[1] - before[1]) / steps, step)
             w.add_scalar("losses/q_values", (now[2] - before[2]) / steps, step)
         self._totals = now

@@ -172,7 +172,7 @@ def save_training(run_dir: Path, agent: Agent, state: SavedState, config: Mappin
     latest checkpoint."""
     payload = {
         "format": state.FORMAT,
-        "agent": agent.state_dict(),  # type: ignore[attr-defined]
+        "agent": agent.state_dict(),
         "trainer": state.to_dict(),
         "config": dict(config) if config is not None else None,
     }
@@ -202,7 +202,7 @@ def restore_training(
                 "resume=true with settings that differ from the checkpoint's run (a resumed run "
                 "must continue the same experiment): " + "; ".join(diff)
             )
-    agent.load_state_dict(payload["agent"])  # type: ignore[attr-defined]
+    agent.load_state_dict(payload["agent"])
     state = state_cls.from_dict(payload["trainer"])  # type: ignore[attr-defined]
     log.info("resuming after %d training episodes (%d transitions)", state.episodes_done, state.transitions)
     return state

@@ -322,6 +322,22 @@ def test_n_step_windows_are_kept_per_episode():
     ]
 
 
+def test_an_episode_ended_without_a_last_transition_stores_its_windows_from_true_observations():
+    """The target could no longer be observed after its third decision (the runner hands no
+    transition for that slot): ``end_episode`` stores the pending windows, each bootstrapping from the
+    last true observation (not terminated, not truncated), at gamma ** (steps in the window)."""
+    agent = _agent(n_step=3, gamma=0.5, learning_starts=10**6)
+    episode = agent.new_episode(np.random.default_rng(0))
+    for t in _chain(0, [1.0, 2.0], None):
+        agent.observe(t, episode)
+    assert len(agent.replay) == 0 and len(episode.pending) == 2
+    agent.end_episode(episode)
+    assert not episode.pending
+    assert _stored(agent) == [(0.0, 1 + 0.5 * 2, 2.0, False, False, 0.25), (1.0, 2.0, 2.0, False, False, 0.5)]
+    agent.end_episode(agent.new_episode(np.random.default_rng(1)))  # an episode without transitions
+    assert len(agent.replay) == 2
+
+
 def test_n_step_target_bootstraps_at_gamma_to_the_n():
     agent = _agent(n_step=3, gamma=0.5, learning_starts=10**6, hidden=(8,))
     _set_head_bias(agent.target, [2.0, 9.0, 4.0])  # max Q_target(s', .) = 9 whatever s'

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from evcd.agents import (
-    AGENT_NAMES,
-    FLEET_AGENT_NAMES,
     agent_class,
+    agent_names,
     make_agent,
     make_agent_for_env,
     observation_blocks,
@@ -285,9 +284,9 @@ def test_the_fleet_rules_are_registered_apart_from_the_single_env_dispatchers():
     for name, cls in (("reservation", ReservationAgent), ("central", CentralAgent)):
         agent = make_agent(name, 4, np.random.default_rng(0), charge_s=600.0)
         assert type(agent) is cls and agent_class(name) is cls and agent.charge_s == 600.0
-        assert name in FLEET_AGENT_NAMES and name not in AGENT_NAMES  # no conf/agent file: not a dispatcher
-    assert all(4 in agent_class(name).obs_blocks for name in FLEET_AGENT_NAMES)
-    assert all(3 in agent_class(name).obs_blocks for name in AGENT_NAMES)
+        assert name in agent_names("fleet") and name not in agent_names("single")  # [D, N, Z, H] only
+    assert all(4 in agent_class(name).obs_blocks for name in agent_names("fleet"))
+    assert all(3 in agent_class(name).obs_blocks for name in agent_names("single"))
     with pytest.raises(ValueError, match=r"'centrall'.*reservation, central"):
         make_agent("centrall", 3, np.random.default_rng(0))
     with pytest.raises(ValueError, match=r"reservation.*\['speed'\]"):

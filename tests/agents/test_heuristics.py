@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from evcd.agents import AGENT_NAMES, Agent, Transition, agent_class, make_agent, make_agent_for_env
+from evcd.agents import Agent, Transition, agent_class, agent_names, make_agent, make_agent_for_env
 from evcd.agents.heuristics import GreedyAgent, QueueAwareAgent, RandomAgent
 from evcd.env.observation import D_SCALE_M, N_SCALE
 
@@ -31,11 +31,11 @@ def random_obs(rng: np.random.Generator, m: int) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------- registry
 def test_registry_builds_every_agent_by_name():
-    for name in AGENT_NAMES:
+    for name in agent_names("single"):
         agent = make_agent(name, 4, np.random.default_rng(0))
         assert isinstance(agent, Agent) and agent.name == name and agent.n_stations == 4
         assert agent_class(name) is type(agent)
-    assert {"random", "greedy", "queue_aware"} <= set(AGENT_NAMES)
+    assert {"random", "greedy", "queue_aware"} <= set(agent_names("single"))
 
 
 def test_unknown_agent_is_named_with_the_known_ones():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -272,3 +273,68 @@ def test_sumo_failure_truncates_the_batch_in_flight_and_the_next_batch_runs(make
 def test_bad_batch_size_is_refused(make_env, bad):
     with pytest.raises(ValueError, match="batch_episodes"):
         BatchedRunner(make_env(), bad)
+
+
+# ------------------------------------------------------------------------- learning from true transitions
+@dataclass
+class Heard(EpisodeState):
+    """What :class:`Listener` was handed of one episode: its transitions, then its end."""
+
+    steps: list[Any] = field(default_factory=list)
+    ended: int = 0
+    decisions: int = 0
+
+
+class Listener(Agent):
+    """Drives to the nearest station and records every ``observe`` and ``end_episode`` of each episode."""
+
+    name = "listener"
+    learns = True
+
+    def __init__(self) -> None:
+        self.heard: list[Heard] = []
+        super().__init__(2, np.random.default_rng(0))
+        self.heard.clear()  # the state act() would use
+
+    def new_episode(self, rng: np.random.Generator) -> Heard:
+        self.heard.append(Heard(rng))
+        return self.heard[-1]
+
+    def decide(self, obs: np.ndarray, episodes: Sequence[Heard], explore: bool = False) -> np.ndarray:
+        for e in episodes:
+            assert not e.ended  # no decision after the end
+            e.decisions += 1
+        return np.asarray(obs)[:, :2].argmin(axis=1)
+
+    def observe(self, transition: Any, episode: Any = None) -> None:
+        assert not episode.ended  # every transition comes before the end
+        episode.steps.append(transition)
+
+    def end_episode(self, episode: Any = None) -> None:
+        episode.ended += 1
+
+
+STOPPED_ON_B1C1 = car("wall", 0, "A1B1 B1C1 C1D1", stop='<stop lane="B1C1_0" endPos="40" duration="100000"/>')
+
+
+@pytest.mark.parametrize("engine", ["single", "batched"])
+def test_an_aborted_episode_hands_learners_only_true_transitions(make_small_env, engine):
+    """A target that teleports (stuck behind a stopped car) can no longer be observed: its last slot
+    reaches no learner (its next observation would be the one before the slot), its episode still
+    ends with ``end_episode``; an episode that ends charging hands over every slot, the last one
+    terminated. Both engines hand over the same transitions."""
+    specs = specs_with([{"departure": 100, "origin": "A1B1", "depart_pos": 20.0}, NEAR_CS2])
+    env = make_small_env([STOPPED_ON_B1C1], time_to_teleport=45, stuck_limit=600)
+    runner = SingleEnvRunner(env) if engine == "single" else BatchedRunner(env, batch_episodes=2)
+    agent = Listener()
+    rows = runner.run(specs, agent, learn=True)
+    runner.close()
+    assert [r.reason for r in rows] == ["teleported", "charging"]
+    aborted, charged = sorted(agent.heard, key=lambda h: len(h.steps) == h.decisions)
+    assert aborted.ended == charged.ended == 1
+    assert len(aborted.steps) == aborted.decisions - 1 >= 1  # the teleported slot is not handed over
+    assert not any(t.terminated or t.truncated for t in aborted.steps)
+    for steps in (aborted.steps, charged.steps):
+        assert all(np.array_equal(a.next_obs, b.obs) for a, b in itertools.pairwise(steps))
+    assert len(charged.steps) == charged.decisions and charged.steps[-1].terminated
+    assert sum(t.reward for t in charged.steps) == pytest.approx(rows[1].episode_return)

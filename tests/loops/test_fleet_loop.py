@@ -20,6 +20,7 @@ from tests.env.handmade import ev
 class _State:
     rng: np.random.Generator
     steps: list[Transition] = field(default_factory=list)
+    ended: int = 0
 
 
 class Recorder:
@@ -41,7 +42,11 @@ class Recorder:
         return np.array([1 if e.steps else 0 for e in episodes])
 
     def observe(self, transition: Transition, episode: Any = None) -> None:
+        assert not episode.ended
         episode.steps.append(transition)
+
+    def end_episode(self, episode: Any = None) -> None:
+        episode.ended += 1
 
 
 def test_every_agent_step_reaches_observe_with_its_own_state(make_small_fleet) -> None:
@@ -62,6 +67,7 @@ def test_every_agent_step_reaches_observe_with_its_own_state(make_small_fleet) -
         assert [t.action for t in steps] == [0] + [1] * (len(steps) - 1)
         assert all(np.array_equal(s.next_obs, t.obs) for s, t in itertools.pairwise(steps))
         assert steps[-1].terminated and not any(t.terminated for t in steps[:-1])
+        assert state.ended == 1  # each EV's end, once, after its last step
         assert -sum(t.reward for t in steps) * 3600 == pytest.approx(outcomes[vid]["travel_time"])
         assert ep.returns[vid] == pytest.approx(sum(t.reward for t in steps))
     again = Recorder()
@@ -97,10 +103,24 @@ class Assign:
     def observe(self, *args: Any) -> None:
         return None
 
+    def end_episode(self, *args: Any) -> None:
+        return None
 
-@pytest.mark.parametrize("in_turn", [False, True])
+
+#: The learners of the best-split test, with settings that learn it in its budget.
+SPLIT_LEARNERS = {
+    "dueling_ddqn": {"hidden": (32, 32), "lr": 3e-3, "batch_size": 32, "gamma": 0.9, "learning_starts": 50,
+                     "target_update": 100, "exploration_steps": 600, "reward_scale": 10.0, "loss": "huber"},
+    "ppo": {"hidden": (32, 32), "lr": 3e-3, "rollout_steps": 64, "minibatch_size": 32, "gamma": 0.9,
+            "reward_scale": 600.0, "entropy_coef": 0.01},
+}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("learner", "in_turn"), [("dueling_ddqn", False), ("dueling_ddqn", True), ("ppo", False)]
+)
 def test_the_shared_learner_finds_the_best_split_of_two_evs(
-    make_small_fleet, one_torch_thread, in_turn: bool
+    make_small_fleet, one_torch_thread, learner: str, in_turn: bool
 ) -> None:
     from evcd.agents import make_agent_for_env
     from evcd.agents.dqn_config import DQNConfig
@@ -116,14 +136,20 @@ def test_the_shared_learner_finds_the_best_split_of_two_evs(
     assert totals[(1, 1)] - best > 60  # herding at the one-point station is costly
     greedy = play_fleet(env, make_agent_for_env("greedy", env, np.random.default_rng(0)), episode_spec(0, 0))
     assert greedy.measures.guided_travel * 2 == pytest.approx(totals[(1, 1)])  # nearest by road: it herds
-    config = DQNConfig(hidden=(32, 32), lr=3e-3, batch_size=32, gamma=0.9, learning_starts=50,
-                       target_update=100, exploration_steps=600, reward_scale=10.0, loss="huber",
-                       in_turn=in_turn)  # fmt: skip
-    agent = make_agent_for_env("dueling_ddqn", env, np.random.default_rng(0), config=config)
+    settings = SPLIT_LEARNERS[learner]
+    if learner == "ppo":
+        agent = make_agent_for_env("ppo", env, np.random.default_rng(0), **settings)
+    else:
+        config = DQNConfig(**settings, in_turn=in_turn)
+        agent = make_agent_for_env(learner, env, np.random.default_rng(0), config=config)
     assert agent.obs_dim == 8
     played = train_fleet(env, agent, 100, seed=0)  # ~800 agent steps
-    # every agent step reached the replay (in turn: each one at the EV's next decision or its end)
-    assert len(agent.replay) == agent.steps == sum(ep.transitions for ep in played)
+    # every agent step reached the learner (in turn: each one at the EV's next decision or its end)
+    assert agent.steps == sum(ep.transitions for ep in played)
+    if learner == "ppo":
+        assert agent.stats()["updates"] >= 10 and agent.stats()["episodes"] == 2 * len(played)
+    else:
+        assert len(agent.replay) == agent.steps
     learned = play_fleet(env, agent, episode_spec(0, 0))
     assert learned.measures.guided_travel * 2 == pytest.approx(best)
 

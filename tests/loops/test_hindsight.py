@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
-from evcd.agents import AGENT_NAMES, Agent
+from evcd.agents import Agent, agent_names
 from evcd.agents.heuristics import FixedStationAgent
 from evcd.env import ChargingNavEnv
 from evcd.env.runners import EpisodeRow, make_runner
 from evcd.loops.evaluate import evaluate
-from evcd.loops.hindsight import DISPATCHERS, HindsightBound, best_in_hindsight, make_dispatcher
+from evcd.loops.hindsight import HindsightBound, best_in_hindsight, dispatcher_names, make_dispatcher
 from evcd.loops.run_files import results_dict
 from tests.conftest import make_grid_scenario, run_script
 
@@ -67,7 +67,7 @@ def test_hindsight_is_a_bound_played_by_the_loops_not_an_agent(env):
     bound = make_dispatcher("hindsight", env, np.random.default_rng(0))
     assert isinstance(bound, HindsightBound) and not isinstance(bound, Agent)
     assert bound.runs_per_episode == 3 and not bound.learns and bound.report() == {}
-    assert "hindsight" in DISPATCHERS and "hindsight" not in AGENT_NAMES  # agents are dispatchers only
+    assert "hindsight" in dispatcher_names() and "hindsight" not in agent_names()  # not an agent
     with pytest.raises(ValueError, match="takes none"):
         make_dispatcher("hindsight", env, np.random.default_rng(0), speed=1)
     with pytest.raises(ValueError, match=r"'hindsite'.*hindsight"):

@@ -13,12 +13,11 @@ import pytest
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
-from evcd.agents import make_agent_for_env
+from evcd.agents import agent_names, make_agent_for_env
 from evcd.cli.params import demand_config, env_kwargs, fleet_kwargs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
-from evcd.loops.fleet import FLEET_DISPATCHERS
-from evcd.loops.hindsight import DISPATCHERS, make_dispatcher
+from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.loops.run_files import CSV_FIELDS
 from evcd.scenario.demand import DemandConfig
 from tests.conftest import CONF, compose_config, run_script
@@ -74,8 +73,10 @@ def test_every_agent_config_builds_its_agent(scenario_dir):
     import numpy as np
 
     env = ChargingNavEnv(**env_kwargs(compose_evaluate(f"scenario.path={scenario_dir}")))  # no SUMO yet
-    assert set(DISPATCHERS) | set(FLEET_DISPATCHERS) == {p.stem for p in (CONF / "agent").glob("*.yaml")}
-    for name in DISPATCHERS:
+    files = {p.stem for p in (CONF / "agent").glob("*.yaml")}
+    assert files <= set(dispatcher_names()) | set(agent_names("fleet"))  # no file for an unknown agent
+    assert set(dispatcher_names()) | set(agent_names("fleet")) == {*agent_names(), "hindsight"}
+    for name in dispatcher_names():
         params = OmegaConf.to_container(compose_evaluate(f"agent={name}").agent)
         assert params.pop("name") == name
         agent = make_dispatcher(name, env, np.random.default_rng(0), **params)
@@ -175,7 +176,7 @@ def test_the_fleet_task_composes_its_defaults_and_builds_every_fleet_rule(small)
     cfg = compose_evaluate(*small, *FLEET, "fleet.guided_share=0.5")
     env = FleetEnv(**fleet_kwargs(cfg))  # no SUMO
     assert env.guided_share == 0.5 and env.config.departure_window == (21600.0, 25200.0)
-    for name in FLEET_DISPATCHERS:
+    for name in agent_names("fleet"):
         params = OmegaConf.to_container(compose_evaluate(*small, *FLEET, f"agent={name}").agent)
         assert params.pop("name") == name
         assert make_agent_for_env(name, env, np.random.default_rng(0), **params).name == name

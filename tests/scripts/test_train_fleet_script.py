@@ -12,10 +12,9 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
-from evcd.agents import make_agent_for_env
+from evcd.agents import agent_names, make_agent_for_env
 from evcd.cli.params import fleet_kwargs
 from evcd.env.fleet import FleetEnv
-from evcd.loops.fleet import FLEET_DISPATCHERS
 from evcd.utils.checkpoint import load_checkpoint
 from tests.conftest import compose_config, run_script
 
@@ -62,7 +61,7 @@ def test_the_fleet_experiment_composes_and_builds_every_fleet_dispatcher(script_
     cfg = compose_config("train", *script_overrides, *FLEET)
     env = FleetEnv(**fleet_kwargs(cfg))  # no SUMO
     assert env.config.demand_seeds == (0,) and env.config.departure_window == (21600.0, 25200.0)
-    for name in FLEET_DISPATCHERS:
+    for name in agent_names("fleet"):
         params = OmegaConf.to_container(
             compose_config("train", *script_overrides, *FLEET, f"agent={name}").agent
         )

@@ -27,7 +27,7 @@ from evcd.agents.dqn import DQNAgent
 from evcd.agents.dqn_config import DQNConfig
 from evcd.cli.params import agent_params, env_kwargs
 from evcd.env import ChargingNavEnv
-from evcd.loops.hindsight import DISPATCHERS, make_dispatcher
+from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.utils.checkpoint import load_checkpoint
 from tests.conftest import CONF, SCRIPTS, compose_config, run_script
 
@@ -119,7 +119,7 @@ def final_weights(run_dir: Path) -> dict[str, torch.Tensor]:
 @pytest.mark.parametrize("experiment", [e for e in EXPERIMENTS if e != "fleet"])  # the fleet's: its own file
 @pytest.mark.parametrize("evs", [200, 300, 400])
 def test_every_agent_and_experiment_composes_and_builds(experiment, evs, scenario_dir):
-    for name in DISPATCHERS:
+    for name in dispatcher_names():
         cfg = compose_train(
             f"agent={name}", f"experiment={experiment}", f"evs={evs}", f"scenario.path={scenario_dir}"
         )

@@ -6,13 +6,15 @@
 
 A runner plays the episodes named by :class:`EpisodeSpec`\\ s (the reset seed and the agent's
 per-episode generator) with an agent, exploring or not, and, when ``learn`` is set, hands the agent
-every transition with its episode's state (:meth:`Policy.observe`). It returns one
+every transition with its episode's state (:meth:`Policy.observe`) and then the episode's end
+(:meth:`Policy.end_episode`); an episode whose target could no longer be observed
+(:data:`~evcd.env.episode_rules.UNOBSERVED`) ends without a last transition. It returns one
 :class:`EpisodeRow` per spec, in the order of the specs, and calls ``on_episode`` as each episode
 ends. The loops above it (:mod:`evcd.loops`) never touch an environment, so a runner that plays
 many episodes in one simulation (the batched engine) plugs in behind this interface without
 changing them or the agents. Such a runner may keep
 several episodes in flight at once; what it must guarantee is that the same specs, agent state and
-settings give the same rows and the same sequence of ``observe`` calls.
+settings give the same rows and the same sequence of ``observe`` and ``end_episode`` calls.
 
 The environment layer does not import agents: a runner talks to anything with the :class:`Policy`
 methods, which keep each episode's state apart (:meth:`Policy.new_episode`), so that one agent can
@@ -68,6 +70,9 @@ class Policy(Protocol):
 
     def observe(self, transition: Transition, episode: Any) -> None:
         """Learn from one transition of the episode whose state is ``episode``."""
+
+    def end_episode(self, episode: Any) -> None:
+        """The episode whose state is ``episode`` ended (after its last :meth:`observe`)."""
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,9 @@ the order of the specs, and the targets due decide together in one ``agent.decid
 
 An episode ends in one of two ways: :meth:`BatchSimulation._finish`, by the rules, with a final
 observation (charging, stuck, time cap); or :meth:`BatchSimulation._abort`, where the target can no
-longer be observed (it vanished or teleported, could not be inserted, or SUMO failed).
+longer be observed (it vanished or teleported, could not be inserted, or SUMO failed): its last slot
+reaches no learner (:data:`~evcd.env.episode_rules.UNOBSERVED`). Either way a learner then hears of
+the episode's end (``agent.end_episode``).
 """
 
 from __future__ import annotations
@@ -289,8 +291,9 @@ class BatchSimulation:
         self, live: LiveTarget, reason: str, now: float, error: str = "", on_road: bool = False
     ) -> None:
         """End the episode of a target that can no longer be observed (vanished, teleported, not
-        inserted, SUMO error): its transition ends on the last observation it had. ``on_road``: its
-        vehicle still stands on an edge in this step (the other targets' ``N`` discounts it)."""
+        inserted, SUMO error): its last slot has no true next observation, so the agent gets no
+        transition for it, only the episode's end. ``on_road``: its vehicle still stands on an edge
+        in this step (the other targets' ``N`` discounts it)."""
         self._end(live, reason, now, observe=False, on_road=on_road, error=error)
 
     def _end(self, live: LiveTarget, reason: str, now: float, *, observe: bool, on_road: bool,
@@ -304,6 +307,8 @@ class BatchSimulation:
         visits = live.close_visits(now)
         travel = now - live.plan.departure if started else None
         transition = self._transition(live, now, started=started, done=True, travel=travel)
+        if not observe:  # no true next observation: the slot is not learnt from (UNOBSERVED)
+            transition = None
         target = live.target
         info = final_info(
             reason=reason, now=now, departure=live.plan.departure, origin=live.plan.origin,
@@ -332,9 +337,11 @@ class BatchSimulation:
         the order of the specs."""
         events = sorted(self._events, key=lambda e: e[0].order)
         self._events = []
-        for live, transition, _ in events:
+        for live, transition, row in events:
             if self.learn and transition is not None:
                 self.agent.observe(transition, live.agent_state)
+            if self.learn and row is not None and live.agent_state is not None:
+                self.agent.end_episode(live.agent_state)
         for live, _, row in events:
             if row is not None:
                 self.finished(live, row)

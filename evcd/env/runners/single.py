@@ -1,4 +1,9 @@
-"""Episodes one after another in one environment (``engine=single``)."""
+"""Episodes one after another in one environment (``engine=single``).
+
+A learner sees every transition of an episode (``agent.observe``), then its end
+(``agent.end_episode``); the last slot of an episode whose target could no longer be observed
+(:data:`~evcd.env.episode_rules.UNOBSERVED`) is not handed over: its next observation is not true.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +13,7 @@ from collections.abc import Sequence
 import gymnasium
 import numpy as np
 
+from evcd.env.episode_rules import UNOBSERVED
 from evcd.env.runners.base import (
     EpisodeCallback,
     EpisodeRow,
@@ -77,10 +83,12 @@ class SingleEnvRunner(EpisodeRunner):
             action = int(agent.decide(np.asarray(obs)[None], [state], explore)[0])
             choices.append(action)
             next_obs, reward, terminated, truncated, info = self.env.step(action)
-            if learn:
+            if learn and not (truncated and info.get("reason") in UNOBSERVED):
                 agent.observe(Transition(obs, action, float(reward), next_obs, terminated, truncated), state)
             obs = next_obs
             total += float(reward)
+        if learn:
+            agent.end_episode(state)
         return row_from_info(
             spec, info, choices, total, truncated and not terminated, time.perf_counter() - t0
         )
