@@ -312,9 +312,10 @@ def report_lines(result: Any, evs: int) -> list[str]:
     s, t = result.evaluation.summary, result.training
     lines = []
     if t["episodes"]:
+        targets = f", {t['target_updates']} target updates" if t["target_updates"] else ""
         lines.append(
             f"trained {t['episodes']} episodes, {t['transitions']} transitions, {t['gradient_steps']} "
-            f"gradient steps, {t['target_updates']} target updates in {t['wall_s']:.0f} s "
+            f"gradient steps{targets} in {t['wall_s']:.0f} s "
             f"({t['transitions_per_second']:.1f} transitions/s; day builds {t['day_build_s']:.0f} s)"
         )
     lines.append(

@@ -27,7 +27,7 @@ from evcd.utils.checkpoint import CheckpointError, load_checkpoint, save_checkpo
 
 M = 3  # stations
 OBS_DIM = 3 * M
-SMALL = {"hidden": (16, 16), "rollout_steps": 1000, "minibatch_size": 8, "epochs": 2}
+SMALL = {"hidden": (16, 16), "network": "mlp", "rollout_steps": 1000, "minibatch_size": 8, "epochs": 2}
 
 #: one torch thread (tiny networks: faster), put back after every test
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -742,8 +742,8 @@ def test_bad_constructor_arguments():
 
 # -- state ----------------------------------------------------------------------------------------------
 
-RESUME = {"hidden": (16, 16), "rollout_steps": 16, "minibatch_size": 6, "epochs": 3, "lr": 3e-3,
-          "reward_scale": 1.0, "gamma": 0.9}  # fmt: skip
+RESUME = {"hidden": (16, 16), "network": "mlp", "rollout_steps": 16, "minibatch_size": 6, "epochs": 3,
+          "lr": 3e-3, "reward_scale": 1.0, "gamma": 0.9}  # fmt: skip
 ENDS = ("terminated", "truncated", "aborted")
 
 
@@ -1043,8 +1043,9 @@ def test_it_learns_a_contextual_bandit():
     """One decision per episode: reward 0 for the station with the smallest queue Z, -1 for another
     (terminated after one step). The greedy policy must find the best station on >= 90% of fresh
     observations after 6,400 episodes (a random policy: about 33%)."""
-    agent = PPOAgent(M, np.random.default_rng(0), points=None, hidden=(32,), lr=3e-3, rollout_steps=256,
-                     minibatch_size=64, epochs=4, reward_scale=1.0, entropy_coef=0.0)  # fmt: skip
+    agent = PPOAgent(M, np.random.default_rng(0), points=None, hidden=(32,), network="mlp", lr=3e-3,
+                     rollout_steps=256, minibatch_size=64, epochs=4, reward_scale=1.0,
+                     entropy_coef=0.0)  # fmt: skip
     test_obs, test_best = _bandit(np.random.default_rng(1), 2000)
 
     def accuracy() -> float:

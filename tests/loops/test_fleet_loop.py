@@ -111,8 +111,8 @@ class Assign:
 SPLIT_LEARNERS = {
     "dueling_ddqn": {"hidden": (32, 32), "lr": 3e-3, "batch_size": 32, "gamma": 0.9, "learning_starts": 50,
                      "target_update": 100, "exploration_steps": 600, "reward_scale": 10.0, "loss": "huber"},
-    "ppo": {"hidden": (32, 32), "lr": 3e-3, "rollout_steps": 64, "minibatch_size": 32, "gamma": 0.9,
-            "reward_scale": 600.0, "entropy_coef": 0.01},
+    "ppo": {"hidden": (32, 32), "network": "mlp", "lr": 3e-3, "rollout_steps": 64, "minibatch_size": 32,
+            "epochs": 4, "gamma": 0.9, "reward_scale": 600.0, "entropy_coef": 0.01},
 }  # fmt: skip
 
 
