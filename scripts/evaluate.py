@@ -28,7 +28,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.agents import agent_class, make_agent_for_env
+from evcd.agents import agent_class, agent_defaults, make_agent_for_env
 from evcd.agents.saved_policy import saved_policy
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.params import agent_params, env_kwargs, fleet_kwargs
@@ -62,12 +62,13 @@ def trained_policy(
     name: str, params: dict[str, Any], learns: bool
 ) -> tuple[dict[str, Any], Mapping[str, Any] | None]:
     """The agent's arguments and, for a learner, its trained policy (``agent.checkpoint``), whose
-    network settings the arguments take (:meth:`~evcd.agents.Agent.checkpoint_options`); load the
-    policy into the agent once it is made.
+    network settings replace the agent block's (:meth:`~evcd.agents.Agent.checkpoint_options`: the
+    policy is rebuilt as it was trained); load the policy into the agent once it is made.
 
     Raises:
         ValueError: a learner without ``agent.checkpoint``.
-        CheckpointError: the checkpoint is unreadable or does not hold an agent of this kind.
+        CheckpointError: the checkpoint is unreadable, does not hold an agent of this kind, or holds
+            a policy another name stands for (``agent=dqn`` with a Dueling DDQN policy).
     """
     path = params.pop("checkpoint", None)
     if not learns:
@@ -81,8 +82,14 @@ def trained_policy(
         options = agent_class(name).checkpoint_options(policy)
     except CheckpointError as exc:
         raise CheckpointError(f"checkpoint {path!r}: {exc}") from exc
+    implied = agent_defaults(name)
+    clash = {k: v for k, v in options.items() if k in implied and implied[k] != v}
+    if clash:
+        raise CheckpointError(f"checkpoint {path!r} holds a policy with {clash}, but agent={name} means "
+                              f"{ {k: implied[k] for k in clash} }: evaluate it under the name it was "
+                              "trained as")  # fmt: skip
     log.info("%s: the trained policy of %s", name, path)
-    return {**options, **params}, policy
+    return {**params, **options}, policy
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:

@@ -28,7 +28,6 @@ from a seed drawn from ``rng``. :meth:`DQNAgent.state_dict` holds everything a r
 from __future__ import annotations
 
 import copy
-import dataclasses
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
@@ -51,11 +50,11 @@ from evcd.agents.dqn_config import DQNConfig, linear_schedule
 from evcd.agents.dqn_episode import DQNEpisode
 from evcd.agents.dqn_state import STATE_FORMAT, check_policy_state, policy_settings
 from evcd.agents.in_turn import hold, learner_tick
-from evcd.agents.inputs import input_factor, observation_divisors
+from evcd.agents.inputs import input_factor, network_input, observation_divisors
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
-from evcd.utils.validation import check_bool
+from evcd.utils.validation import check_bool, with_overrides
 
 log = logging.getLogger(__name__)
 
@@ -100,14 +99,7 @@ class DQNAgent(Agent):
         **hyperparameters: Any,
     ) -> None:
         super().__init__(n_stations, rng)
-        unknown = sorted(set(hyperparameters) - set(DQNConfig.field_names()))
-        if unknown:
-            raise ValueError(f"DQNAgent: unknown hyperparameters {unknown}; DQNConfig has "
-                             f"{list(DQNConfig.field_names())}")  # fmt: skip
-        if config is not None and not isinstance(config, DQNConfig):
-            raise ValueError(f"config={config!r}: must be a DQNConfig")
-        config = config or DQNConfig()
-        self.config = dataclasses.replace(config, **hyperparameters) if hyperparameters else config
+        self.config = with_overrides("DQNAgent", DQNConfig, config, hyperparameters)
         self.double = check_bool("double", double)
         self.dueling = check_bool("dueling", dueling)
         self.blocks = check_blocks(obs_blocks, "obs_blocks")
@@ -205,12 +197,7 @@ class DQNAgent(Agent):
         )
 
     def _input(self, obs: np.ndarray) -> torch.Tensor:
-        x = np.asarray(obs, dtype=np.float32)
-        if x.shape[-1:] != (self.obs_dim,):
-            raise ValueError(
-                f"observation shape {x.shape}: expected (..., {self.obs_dim}), {self.blocks} x m"
-            )
-        return torch.from_numpy(x * self._obs_to_input)
+        return network_input(obs, self._obs_to_input, self.blocks)
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         """The online network's Q-values for one observation ``(m,)`` or a batch ``(k, m)``."""

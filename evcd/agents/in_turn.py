@@ -128,7 +128,14 @@ def learner_tick(
 def hold(transition: Any, episode: Any, store: Callable[[Any, Any], None]) -> None:
     """A learner's transition of an EV decided in turn: its observation becomes the one the EV decided
     on; a last transition (terminated or truncated) goes to ``store`` at once, any other waits in
-    ``episode.held`` for the observation of the EV's next decision (:func:`learner_tick`)."""
+    ``episode.held`` for the observation of the EV's next decision (:func:`learner_tick`).
+
+    A last transition keeps the tick's observation as the env gave it: the EV decides no more, so no
+    EV decides before it at that tick, and the uncorrected observation is exactly what an EV deciding
+    first sees (the same kind of input as every other next observation). It only matters for a
+    truncation (stuck, time cap), which bootstraps from it; a termination does not. An EV that could
+    no longer be observed gets no last transition; its held one is stored at ``end_episode`` with the
+    next observation it had."""
     transition = transition._replace(obs=episode.seen)
     episode.seen = None
     if transition.terminated or transition.truncated:

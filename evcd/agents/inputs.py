@@ -3,7 +3,7 @@ vehicles and multiples of the charging points, whatever units the environment ha
 
     divisors = observation_divisors(points, n_stations, blocks, normalized)   # env units -> physical
     factor = input_factor(input_scale, divisors, normalized)                  # env units -> network
-    x = torch.from_numpy(obs.astype(np.float32) * factor)
+    x = network_input(obs, factor, blocks)
 
 A learner keeps ``input_scale`` (physical -> network) with its networks in a checkpoint, so a loaded
 policy sees what it was trained on in any environment; the DQN and PPO learners share this.
@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+import torch
 
 from evcd.env.observation import unit_divisors
 
@@ -45,3 +46,16 @@ def input_factor(input_scale: np.ndarray, divisors: np.ndarray, normalized: bool
     reading (times ``divisors`` where the environment normalises) times ``input_scale``."""
     units = divisors if normalized else np.ones(len(divisors))
     return (np.asarray(input_scale, np.float32).astype(np.float64) * units).astype(np.float32)
+
+
+def network_input(obs: np.ndarray, factor: np.ndarray, blocks: int) -> torch.Tensor:
+    """``obs`` (one observation or a batch) times ``factor`` (:func:`input_factor`), as a float32
+    tensor.
+
+    Raises:
+        ValueError: the last axis is not ``len(factor)`` (``blocks`` x stations).
+    """
+    x = np.asarray(obs, dtype=np.float32)
+    if x.shape[-1:] != (len(factor),):
+        raise ValueError(f"observation shape {x.shape}: expected (..., {len(factor)}), {blocks} x m")
+    return torch.from_numpy(x * factor)

@@ -29,7 +29,6 @@ with the weights of an uninterrupted one.
 from __future__ import annotations
 
 import copy
-import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, ClassVar
@@ -46,12 +45,12 @@ from evcd.agents.base import (
     observation_layout,
     observation_units,
 )
-from evcd.agents.inputs import input_factor, observation_divisors
+from evcd.agents.inputs import input_factor, network_input, observation_divisors
 from evcd.agents.networks import make_q_network
 from evcd.agents.ppo_config import PPOConfig
 from evcd.agents.ppo_loss import gae, ppo_loss
 from evcd.utils.checkpoint import CheckpointError, to_numpy
-from evcd.utils.validation import check_bool
+from evcd.utils.validation import check_bool, with_overrides
 
 #: The ``format`` of a PPO agent's state.
 STATE_FORMAT = "evcd.ppo/1"
@@ -109,14 +108,7 @@ class PPOAgent(Agent):
     ) -> None:
         super().__init__(n_stations, rng)
         del checkpoint
-        unknown = sorted(set(hyperparameters) - set(PPOConfig.field_names()))
-        if unknown:
-            raise ValueError(f"PPOAgent: unknown hyperparameters {unknown}; PPOConfig has "
-                             f"{list(PPOConfig.field_names())}")  # fmt: skip
-        if config is not None and not isinstance(config, PPOConfig):
-            raise ValueError(f"config={config!r}: must be a PPOConfig")
-        values = {k: tuple(v) if isinstance(v, list) else v for k, v in hyperparameters.items()}
-        self.config = dataclasses.replace(config or PPOConfig(), **values)
+        self.config = with_overrides("PPOAgent", PPOConfig, config, hyperparameters)
         self.blocks = check_blocks(obs_blocks, "obs_blocks")
         self.obs_dim = self.blocks * self.n_stations
         self.normalized = check_bool("normalized", normalized)
@@ -169,12 +161,7 @@ class PPOAgent(Agent):
 
     # ------------------------------------------------------------------ acting
     def _input(self, obs: np.ndarray) -> torch.Tensor:
-        x = np.asarray(obs, dtype=np.float32)
-        if x.shape[-1:] != (self.obs_dim,):
-            raise ValueError(
-                f"observation shape {x.shape}: expected (..., {self.obs_dim}), {self.blocks} x m"
-            )
-        return torch.from_numpy(x * self._obs_to_input)
+        return network_input(obs, self._obs_to_input, self.blocks)
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
         """The policy's station probabilities for one observation or a batch."""

@@ -10,6 +10,7 @@ it, the value, and what is allowed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from collections.abc import Collection
@@ -18,6 +19,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 T = TypeVar("T")
+C = TypeVar("C")
 
 
 def is_integer(value: Any) -> bool:
@@ -104,3 +106,21 @@ def check_bool(name: str, value: Any) -> bool:
     if not isinstance(value, bool | np.bool_):
         raise ValueError(f"{name}={value!r}: must be true or false")
     return bool(value)
+
+
+def with_overrides(owner: str, config_cls: type[C], config: Any, overrides: dict[str, Any]) -> C:
+    """``config`` (an instance of the dataclass ``config_cls``, or ``None`` for its defaults) with the
+    fields named in ``overrides`` replaced (the dataclass checks the values).
+
+    Raises:
+        ValueError: an override that is not a field (naming it, ``owner`` and the fields), or a
+            ``config`` of another type.
+    """
+    fields = [f.name for f in dataclasses.fields(config_cls)]
+    unknown = sorted(set(overrides) - set(fields))
+    if unknown:
+        raise ValueError(f"{owner}: unknown hyperparameters {unknown}; {config_cls.__name__} has {fields}")
+    if config is not None and not isinstance(config, config_cls):
+        raise ValueError(f"config={config!r}: must be a {config_cls.__name__}")
+    config = config if config is not None else config_cls()
+    return dataclasses.replace(config, **overrides) if overrides else config

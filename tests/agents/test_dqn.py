@@ -25,6 +25,7 @@ from evcd.env.observation import unit_divisors
 from evcd.env.runners import SingleEnvRunner
 from evcd.loops.seeds import TRAIN_STREAM, episode_specs
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from tests.agents.states import np_state_equal, state_equal
 from tests.agents.toy_env import ToyDispatchEnv
 
 M = 3  # stations
@@ -96,25 +97,6 @@ def _set_head_bias(net: torch.nn.Module, bias: list[float]) -> None:
         if isinstance(net, DuelingQNetwork):
             net.value.weight.zero_()
             net.value.bias.zero_()
-
-
-def _np_state_equal(a, b) -> bool:
-    return a[0] == b[0] and np.array_equal(a[1], b[1]) and tuple(a[2:]) == tuple(b[2:])
-
-
-def _state_equal(a, b) -> bool:
-    """Deep equality of state dicts (tensors with torch.equal, arrays with array_equal)."""
-    if isinstance(a, torch.Tensor):
-        return isinstance(b, torch.Tensor) and a.dtype == b.dtype and torch.equal(a, b)
-    if isinstance(a, np.ndarray):
-        return np.array_equal(a, np.asarray(b))
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(_state_equal(a[k], b[k]) for k in a)
-    if isinstance(a, list | tuple):
-        return len(a) == len(b) and all(_state_equal(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, float) and math.isnan(a):
-        return isinstance(b, float) and math.isnan(b)
-    return a == b
 
 
 def _train(agent: DQNAgent, seed: int, episodes: range, explore: bool = True) -> list:
@@ -965,8 +947,8 @@ def test_restored_agent_continues_exactly(tmp_path, via, name, exploration, extr
     assert original.gradient_steps > 100
     assert _equal(_params(original.online), _params(restored.online))
     assert _equal(_params(original.target), _params(restored.target))
-    assert _state_equal(original.optimizer.state_dict(), restored.optimizer.state_dict())
-    assert _state_equal(original.replay.state_dict(), restored.replay.state_dict())
+    assert state_equal(original.optimizer.state_dict(), restored.optimizer.state_dict())
+    assert state_equal(original.replay.state_dict(), restored.replay.state_dict())
     assert original.learn_rng.bit_generator.state == restored.learn_rng.bit_generator.state
 
 
@@ -1060,7 +1042,7 @@ def test_policy_only_loads_just_the_networks():
     assert fresh.steps == 0
     assert fresh.gradient_steps == 0
     assert len(fresh.replay) == 0
-    assert _state_equal(fresh.optimizer.state_dict(), optimizer)
+    assert state_equal(fresh.optimizer.state_dict(), optimizer)
     assert fresh.epsilon == fresh.config.epsilon_start
     # and it acts like the trained one
     obs = _obs(np.random.default_rng(6), 50)
@@ -1195,7 +1177,7 @@ def test_no_global_random_state_is_used():
         assert agent.gradient_steps > 0
 
     assert torch.equal(torch.random.get_rng_state(), torch_before)
-    assert _np_state_equal(np.random.get_state(), np_before)
+    assert np_state_equal(np.random.get_state(), np_before)
 
 
 def test_the_station_network_reads_the_fleets_h_per_station():

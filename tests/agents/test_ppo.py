@@ -24,6 +24,7 @@ from evcd.agents.ppo_config import PPOConfig
 from evcd.agents.ppo_loss import LossTerms, gae, ppo_loss
 from evcd.env.observation import unit_divisors
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from tests.agents.states import np_state_equal, state_equal
 
 M = 3  # stations
 OBS_DIM = 3 * M
@@ -52,23 +53,6 @@ def _params(*nets: torch.nn.Module) -> list[torch.Tensor]:
 
 def _equal(a: list[torch.Tensor], b: list[torch.Tensor]) -> bool:
     return len(a) == len(b) and all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
-
-
-def _state_equal(a, b) -> bool:
-    """Deep equality of state dicts (tensors with torch.equal, arrays with array_equal)."""
-    if isinstance(a, torch.Tensor):
-        return isinstance(b, torch.Tensor) and a.dtype == b.dtype and torch.equal(a, b)
-    if isinstance(a, np.ndarray):
-        return np.array_equal(a, np.asarray(b))
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(_state_equal(a[k], b[k]) for k in a)
-    if isinstance(a, list | tuple):
-        return len(a) == len(b) and all(_state_equal(x, y) for x, y in zip(a, b, strict=True))
-    return a == b
-
-
-def _np_state_equal(a, b) -> bool:
-    return a[0] == b[0] and np.array_equal(a[1], b[1]) and tuple(a[2:]) == tuple(b[2:])
 
 
 def _value(agent: PPOAgent, obs: np.ndarray) -> float:
@@ -798,7 +782,7 @@ def _assert_same_agent(a: PPOAgent, b: PPOAgent) -> None:
     assert a.scalars() == b.scalars()
     assert _equal(_params(a.actor), _params(b.actor))
     assert _equal(_params(a.critic), _params(b.critic))
-    assert _state_equal(a.optimizer.state_dict(), b.optimizer.state_dict())
+    assert state_equal(a.optimizer.state_dict(), b.optimizer.state_dict())
     assert a.learn_rng.bit_generator.state == b.learn_rng.bit_generator.state
     assert a.rng.bit_generator.state == b.rng.bit_generator.state
     assert a.rollout["actions"] == b.rollout["actions"]
@@ -856,7 +840,7 @@ def test_state_dict_is_a_snapshot():
     state = original.state_dict()
     copied = copy.deepcopy(state)
     taken = _continue(original)
-    assert _state_equal(state, copied)  # training afterwards did not change it
+    assert state_equal(state, copied)  # training afterwards did not change it
     first = make_agent("ppo", M, np.random.default_rng(7), **RESUME)
     second = make_agent("ppo", M, np.random.default_rng(8), **RESUME)
     first.load_state_dict(state)
@@ -865,7 +849,7 @@ def test_state_dict_is_a_snapshot():
     assert _continue(second) == taken
     _assert_same_agent(first, original)
     _assert_same_agent(second, original)
-    assert _state_equal(state, copied)  # nor did loading it and training the loaded agents
+    assert state_equal(state, copied)  # nor did loading it and training the loaded agents
 
 
 def test_state_dict_is_what_torch_loads_with_weights_only(tmp_path):
@@ -900,7 +884,7 @@ def test_policy_only_loads_just_the_networks():
     assert _equal(_params(fresh.critic), _params(trained.critic))
     assert fresh.stats() == {"transitions": 0.0, "episodes": 0.0, "updates": 0.0, "gradient_steps": 0.0,
                              "rollout": 0.0}  # fmt: skip
-    assert _state_equal(fresh.optimizer.state_dict(), optimizer)
+    assert state_equal(fresh.optimizer.state_dict(), optimizer)
     assert fresh.learn_rng.bit_generator.state == learn_rng
     assert fresh.scalars() == {}
     obs = _obs(np.random.default_rng(6), 50)
@@ -1017,7 +1001,7 @@ def test_no_global_random_state_is_used():
     assert agent.updates > 1
 
     assert torch.equal(torch.random.get_rng_state(), torch_before)
-    assert _np_state_equal(np.random.get_state(), np_before)
+    assert np_state_equal(np.random.get_state(), np_before)
 
 
 def test_the_initial_weights_do_not_depend_on_torchs_global_generator():

@@ -275,6 +275,13 @@ def test_a_tiny_training_run_end_to_end(small, tmp_path):
         )  # fmt: skip  (peak's reward)
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert read_csv(ev / "episodes.csv") == read_csv(out / "episodes.csv")
+    # the policy under a name that means other switches, or another learner's: refused, naming why
+    for name, needle in (("dueling_ddqn", "evaluate it under the name it was trained as"),
+                         ("ppo", "does not hold a PPO agent")):  # fmt: skip
+        proc = run_script("evaluate.py", *plain, f"agent={name}", f"agent.checkpoint={out}", "episodes=1",
+                          f"hydra.run.dir={tmp_path / ('refused_' + name)}")  # fmt: skip
+        log = proc.stdout + proc.stderr
+        assert proc.returncode == 2 and needle in log, log[-2000:]
 
 
 def test_a_rule_agent_goes_through_the_same_script(small, tmp_path):
