@@ -37,6 +37,7 @@ from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
+from evcd.env.runners.fleet import FleetRunner
 from evcd.loops.evaluate import evaluate
 from evcd.loops.fleet import evaluate_fleet, fleet_dispatcher_learns
 from evcd.loops.fleet_figure import plot_fleet_traces
@@ -158,7 +159,7 @@ def run_fleet(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
              cfg.evs, env.guided_share, episodes, seed)  # fmt: skip
     try:
         env.prepare()
-        played, summary = evaluate_fleet(env, agent, episodes, seed, progress=bool(cfg.progress),
+        played, summary = evaluate_fleet(FleetRunner(env), agent, episodes, seed, progress=bool(cfg.progress),
                                          resamples=resamples)  # fmt: skip
     finally:
         env.close()

@@ -22,8 +22,8 @@ from evcd.agents import make_agent_for_env
 from evcd.agents.dqn_config import DQNConfig
 from evcd.agents.heuristics import GreedyAgent
 from evcd.env.fleet import FleetEnv
-from evcd.loops.fleet import play_fleet, train_fleet
-from evcd.loops.seeds import episode_spec
+from evcd.env.runners.fleet import FleetRunner
+from evcd.loops.seeds import TRAIN_STREAM, episode_spec, episode_specs
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +44,7 @@ def fleet_overhead(env_kwargs: Mapping[str, Any], episodes: int = 3, seed: int =
         for i in range(episodes):
             spec = episode_spec(seed, i)
             t0 = wallclock.perf_counter()
-            ep = play_fleet(env, GreedyAgent(len(env.stations), np.random.default_rng(seed)), spec)
+            ep = FleetRunner(env).episode(spec, GreedyAgent(len(env.stations), np.random.default_rng(seed)))
             fleet = wallclock.perf_counter() - t0
             end = ep.trace[-1][0]
             sim = env.simulation
@@ -78,7 +78,8 @@ def fleet_learning_rate(
         env.prepare()
         agent = make_agent_for_env("dueling_ddqn", env, np.random.default_rng(seed), config=config)
         t0 = wallclock.perf_counter()
-        played = train_fleet(env, agent, episodes, seed)
+        specs = episode_specs(seed, range(episodes), TRAIN_STREAM)
+        played = FleetRunner(env).run(specs, agent, explore=True, learn=True)
         wall = wallclock.perf_counter() - t0
     finally:
         env.close()

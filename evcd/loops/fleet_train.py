@@ -10,7 +10,7 @@ closed before the next phase plays.
 
 1. **Training**: fleet episode ``i`` of the training stream of the run seed (its day drawn by its
    reset seed among the training days) is played with exploration, and every guided EV's transitions
-   reach ``agent.observe`` with that EV's own episode state (:func:`~evcd.loops.fleet.play_fleet`:
+   reach ``agent.observe`` with that EV's own episode state (:class:`~evcd.env.runners.fleet.FleetRunner`:
    independent learners with one network and one replay). TensorBoard gets the fleet's ``charts/*``
    per episode at ``global_step`` = agent steps seen. A checkpoint (agent with its replay and
    generators, the rows so far, the validations) is written every ``checkpoint_every`` episodes and
@@ -45,14 +45,14 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, ClassVar
 
-import numpy as np
 from tqdm import tqdm
 
 from evcd.agents.base import Agent
 from evcd.env.fleet import FleetEnv
+from evcd.env.runners.fleet import FleetEpisode, FleetRunner
 from evcd.loops.best_policy import check_learned, keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
-from evcd.loops.fleet import FleetEpisode, evaluate_fleet, fleet_spec, play_fleet
+from evcd.loops.fleet import evaluate_fleet, fleet_spec
 from evcd.loops.fleet_figure import plot_fleet_traces
 from evcd.loops.run_files import (
     CURVE_PNG,
@@ -67,7 +67,7 @@ from evcd.loops.seeds import TRAIN_STREAM, VALIDATION_STREAM, bootstrap_rng, epi
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, paired_values
 from evcd.loops.train_log import TrainLog
 from evcd.loops.train_state import save_training, start_run, training_counters
-from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings
+from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings, finite_mean
 from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
 from evcd.utils.validation import check_int
 
@@ -164,37 +164,31 @@ class FleetValidator:
     def __init__(
         self, env: FleetEnv, settings: ValidationSettings, seed: int, rules: Mapping[str, Agent]
     ) -> None:
-        self.env, self.settings, self.rules = env, settings, dict(rules)
+        self.runner, self.settings, self.rules = FleetRunner(env), settings, dict(rules)
         days = len(env.days)
         self.specs = [fleet_spec(seed, i, days, VALIDATION_STREAM) for i in range(settings.episodes)]
 
     def due(self, episodes_done: int, total: int) -> bool:
         """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""
-        every = self.settings.every
-        return every > 0 and (episodes_done % every == 0 or episodes_done == total)
+        return self.settings.due(episodes_done, total)
 
     def _travel(self, agent: Agent) -> list[float]:
-        return [play_fleet(self.env, agent, spec).measures.guided_travel for spec in self.specs]
+        return [ep.measures.guided_travel for ep in self.runner.run(self.specs, agent)]
 
     def validate(self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord) -> None:
         """Play the validation episodes with ``agent`` (and, the first time, the rules); add a point."""
         try:
-            self.env.prepare()
+            self.runner.prepare()
             for name, rule in self.rules.items():
                 if name not in record.rules:
                     record.rules[name] = self._travel(rule)
             point = ValidationPoint(episodes_done, transitions, self._travel(agent))
         finally:
-            self.env.close()
+            self.runner.close()
         record.points.append(point)
-        rules = ", ".join(f"{n} {_mean(t):.1f} s" for n, t in record.rules.items())
+        rules = ", ".join(f"{n} {finite_mean(t):.1f} s" for n, t in record.rules.items())
         log.info("validation after %d fleet episodes: guided EVs %.1f s over %d episodes (%s)", episodes_done,
                  point.mean, len(point.travel_times), rules)  # fmt: skip
-
-
-def _mean(values: list[float]) -> float:
-    finite = [v for v in values if math.isfinite(v)]
-    return float(np.mean(finite)) if finite else math.nan
 
 
 def _train(
@@ -208,19 +202,19 @@ def _train(
     validator: FleetValidator | None,
 ) -> None:
     every = settings.checkpoint_every or settings.episodes
-    env = envs["train"]
+    runner = FleetRunner(envs["train"])
     state.sessions += 1
     tlog.start(agent.stats())
     bar = tqdm(total=settings.episodes, initial=state.episodes_done, desc=f"fleet train {agent.name}",
                unit="ep", disable=not settings.progress)  # fmt: skip
     try:
         t0 = wallclock.perf_counter()
-        env.prepare()
+        runner.prepare()
         state.prepare_s += wallclock.perf_counter() - t0
         while state.episodes_done < settings.episodes:
             i = state.episodes_done
             spec = episode_spec(settings.seed, i, TRAIN_STREAM)
-            ep = play_fleet(env, agent, spec, explore=True, learn=True)
+            ep = runner.episode(spec, agent, explore=True, learn=True)
             state.rows.append(ep.row())
             state.episodes_done += 1
             state.transitions += ep.transitions
@@ -234,7 +228,7 @@ def _train(
             if done % every and done < settings.episodes:
                 continue
             if validator is not None and validator.due(done, settings.episodes):
-                env.close()  # one simulation per process
+                runner.close()  # one simulation per process
                 t1 = wallclock.perf_counter()
                 validator.validate(agent, done, state.transitions, state.validation)
                 state.validation_s += wallclock.perf_counter() - t1
@@ -248,7 +242,7 @@ def _train(
         raise
     finally:
         bar.close()
-        env.close()
+        runner.close()
 
 
 def train_and_evaluate_fleet(
@@ -299,13 +293,14 @@ def _evaluate(
     training: dict[str, Any],
 ) -> FleetTrainResult:  # fmt: skip
     kwargs = {"progress": settings.progress, "resamples": settings.resamples}
+    runner = FleetRunner(env)
     try:
-        env.prepare()
-        played, summary = evaluate_fleet(env, agent, settings.eval_episodes, settings.seed, **kwargs)
-        bases = {name: evaluate_fleet(env, rule, settings.eval_episodes, settings.seed, **kwargs)
+        runner.prepare()
+        played, summary = evaluate_fleet(runner, agent, settings.eval_episodes, settings.seed, **kwargs)
+        bases = {name: evaluate_fleet(runner, rule, settings.eval_episodes, settings.seed, **kwargs)
                  for name, rule in baselines.items()}  # fmt: skip
     finally:
-        env.close()
+        runner.close()
     rng = bootstrap_rng(settings.seed)
     paired = {
         name: {key: paired_values([getattr(e.measures, key) for e in played],
@@ -320,7 +315,7 @@ def _evaluate(
 def _training_summary(agent: Agent, state: FleetTrainState, episodes: int) -> dict[str, Any]:
     return {
         **training_counters(agent.stats(), state, episodes),
-        "mean_guided_travel": _mean([float(r["guided_travel"]) for r in state.rows]),
+        "mean_guided_travel": finite_mean([float(r["guided_travel"]) for r in state.rows]),
     }
 
 

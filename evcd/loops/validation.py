@@ -57,6 +57,11 @@ class ValidationSettings:
             raise ValueError("train.validation.select_best=true needs a validation to select by: set "
                              "train.validation.every > 0")  # fmt: skip
 
+    def due(self, episodes_done: int, total: int) -> bool:
+        """Whether a validation follows ``episodes_done`` of ``total`` training episodes (and always
+        the last), for either task's trainer."""
+        return self.every > 0 and (episodes_done % self.every == 0 or episodes_done == total)
+
 
 @dataclass
 class ValidationPoint:
@@ -69,8 +74,7 @@ class ValidationPoint:
     @property
     def mean(self) -> float:
         """Mean travel time over the episodes that charged (NaN if none)."""
-        charged = [t for t in self.travel_times if math.isfinite(t)]
-        return float(np.mean(charged)) if charged else math.nan
+        return finite_mean(self.travel_times)
 
     @property
     def truncated(self) -> int:
@@ -106,7 +110,7 @@ class ValidationRecord:
                         "mean": p.mean if math.isfinite(p.mean) else None,
                         "travel_times": plain(p.travel_times)} for p in self.points],
             "rules": {name: plain(times) for name, times in self.rules.items()},
-            "rule_means": {name: _mean(times) for name, times in self.rules.items()},
+            "rule_means": {name: _json(finite_mean(times)) for name, times in self.rules.items()},
             "best_episodes_done": best.episodes_done if (best := self.best()) is not None else None,
         }  # fmt: skip
 
@@ -124,9 +128,14 @@ class ValidationRecord:
         return cls(points, {name: floats(times) for name, times in d.get("rules", {}).items()})
 
 
-def _mean(values: list[float]) -> float | None:
+def finite_mean(values: list[float]) -> float:
+    """The mean of the finite values (a truncated episode's NaN left out); NaN if there is none."""
     charged = [v for v in values if math.isfinite(v)]
-    return float(np.mean(charged)) if charged else None
+    return float(np.mean(charged)) if charged else math.nan
+
+
+def _json(value: float) -> float | None:
+    return value if math.isfinite(value) else None
 
 
 def _travel_times(rows: list[EpisodeRow]) -> list[float]:
@@ -158,8 +167,7 @@ class Validator:
 
     def due(self, episodes_done: int, total: int) -> bool:
         """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""
-        every = self.settings.every
-        return every > 0 and (episodes_done % every == 0 or episodes_done == total)
+        return self.settings.due(episodes_done, total)
 
     def validate(self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord) -> None:
         """Play the validation episodes with ``agent`` (and, the first time, the rules); add a point."""
@@ -174,6 +182,6 @@ class Validator:
             runner.close()
         point = ValidationPoint(episodes_done, transitions, _travel_times(rows))
         record.points.append(point)
-        rules = ", ".join(f"{n} {_mean(t) or math.nan:.1f} s" for n, t in record.rules.items())
+        rules = ", ".join(f"{n} {finite_mean(t):.1f} s" for n, t in record.rules.items())
         log.info("validation after %d episodes: %.1f s over %d episodes (%s)", episodes_done, point.mean,
                  len(rows), rules)  # fmt: skip

@@ -1,4 +1,4 @@
-"""play_fleet: one decide per tick for every agent due, every agent's transitions to observe, with
+"""FleetRunner: one decide per tick for every agent due, every agent's transitions to observe, with
 that agent's own episode state."""
 
 from __future__ import annotations
@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from evcd.env.runners.fleet import FleetRunner
 from evcd.env.transition import Transition
-from evcd.loops.fleet import fleet_spec, play_fleet
-from evcd.loops.seeds import VALIDATION_STREAM, days_of_seed, episode_spec
+from evcd.loops.fleet import fleet_spec
+from evcd.loops.seeds import TRAIN_STREAM, VALIDATION_STREAM, days_of_seed, episode_spec, episode_specs
 from tests.env.handmade import ev
 
 
@@ -55,7 +56,7 @@ def test_every_agent_step_reaches_observe_with_its_own_state(make_small_fleet) -
         [ev("a", 5, north, "pa_cs1"), ev("b", 6, north, "pa_cs1"), ev("c", 60, "D2C2 C2B2 B2A2", "pa_cs2")]
     )
     agent = Recorder()
-    ep = play_fleet(env, agent, episode_spec(0, 0), learn=True)
+    ep = FleetRunner(env).episode(episode_spec(0, 0), agent, learn=True)
     assert len(agent.states) == 3 == ep.measures.guided
     assert ep.transitions == sum(agent.calls) == sum(len(s.steps) for s in agent.states)
     assert max(agent.calls) >= 2  # agents due together are decided together
@@ -71,7 +72,7 @@ def test_every_agent_step_reaches_observe_with_its_own_state(make_small_fleet) -
         assert -sum(t.reward for t in steps) * 3600 == pytest.approx(outcomes[vid]["travel_time"])
         assert ep.returns[vid] == pytest.approx(sum(t.reward for t in steps))
     again = Recorder()
-    play_fleet(env, again, episode_spec(0, 0), learn=True)
+    FleetRunner(env).episode(episode_spec(0, 0), again, learn=True)
     draws = [s.rng.random() for s in agent.states]
     assert draws == [s.rng.random() for s in again.states]  # each EV's generator comes from the seed
     assert len(set(draws)) == 3
@@ -124,17 +125,17 @@ def test_the_shared_learner_finds_the_best_split_of_two_evs(
 ) -> None:
     from evcd.agents import make_agent_for_env
     from evcd.agents.dqn_config import DQNConfig
-    from evcd.loops.fleet import train_fleet
 
     env = make_small_fleet(TWO_EVS, max_travel_time=900.0)
     totals = {}
     for a, b in itertools.product((0, 1), repeat=2):
-        ep = play_fleet(env, Assign({"a": a, "b": b}), episode_spec(0, 0))
+        ep = FleetRunner(env).episode(episode_spec(0, 0), Assign({"a": a, "b": b}))
         assert ep.measures.guided_charged == 2
         totals[(a, b)] = ep.measures.guided_travel * 2
     best = min(totals.values())
     assert totals[(1, 1)] - best > 60  # herding at the one-point station is costly
-    greedy = play_fleet(env, make_agent_for_env("greedy", env, np.random.default_rng(0)), episode_spec(0, 0))
+    rule = make_agent_for_env("greedy", env, np.random.default_rng(0))
+    greedy = FleetRunner(env).episode(episode_spec(0, 0), rule)
     assert greedy.measures.guided_travel * 2 == pytest.approx(totals[(1, 1)])  # nearest by road: it herds
     settings = SPLIT_LEARNERS[learner]
     if learner == "ppo":
@@ -143,14 +144,15 @@ def test_the_shared_learner_finds_the_best_split_of_two_evs(
         config = DQNConfig(**settings, in_turn=in_turn)
         agent = make_agent_for_env(learner, env, np.random.default_rng(0), config=config)
     assert agent.obs_dim == 8
-    played = train_fleet(env, agent, 100, seed=0)  # ~800 agent steps
+    specs = episode_specs(0, range(100), TRAIN_STREAM)
+    played = FleetRunner(env).run(specs, agent, explore=True, learn=True)  # ~800 agent steps
     # every agent step reached the learner (in turn: each one at the EV's next decision or its end)
     assert agent.steps == sum(ep.transitions for ep in played)
     if learner == "ppo":
         assert agent.stats()["updates"] >= 10 and agent.stats()["episodes"] == 2 * len(played)
     else:
         assert len(agent.replay) == agent.steps
-    learned = play_fleet(env, agent, episode_spec(0, 0))
+    learned = FleetRunner(env).episode(episode_spec(0, 0), agent)
     assert learned.measures.guided_travel * 2 == pytest.approx(best)
 
 

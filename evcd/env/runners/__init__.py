@@ -1,4 +1,4 @@
-"""How loops reach episodes: one interface (:class:`EpisodeRunner`), two engines.
+"""How loops reach episodes: one interface (:class:`EpisodeRunner`), three runners.
 
     runner = make_runner(ChargingNavEnv(evs=400), engine="batched")   # or "single"
     rows = runner.run(specs, agent, explore=True, learn=True)
@@ -8,7 +8,9 @@
 - :mod:`evcd.env.runners.single`: one :class:`~evcd.env.ChargingNavEnv` episode after another;
 - :mod:`evcd.env.runners.batched`: many episodes co-simulated in one SUMO run of their day (planning),
   with :mod:`~evcd.env.runners.batch` (the simulation loop), :mod:`~evcd.env.runners.live` (a
-  target's state) and :mod:`~evcd.env.runners.ghost` (its place in a station's queue).
+  target's state) and :mod:`~evcd.env.runners.ghost` (its place in a station's queue);
+- :mod:`evcd.env.runners.fleet`: fleet episodes (``task=fleet``), every guided EV decided by one
+  dispatcher (:class:`FleetRunner`; its rows are :class:`FleetEpisode` rows).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from evcd.env.runners.base import (
     row_from_info,
 )
 from evcd.env.runners.batched import DEFAULT_BATCH_EPISODES, BatchedRunner
+from evcd.env.runners.fleet import FleetEpisode, FleetRunner
 from evcd.env.runners.single import SingleEnvRunner
 from evcd.utils.validation import check_choice, check_int
 
@@ -63,6 +66,8 @@ __all__ = [
     "EpisodeRow",
     "EpisodeRunner",
     "EpisodeSpec",
+    "FleetEpisode",
+    "FleetRunner",
     "Policy",
     "SingleEnvRunner",
     "check_engine",
