@@ -8,10 +8,11 @@
 runs one simulation per process, and each fleet episode starts a fresh one, so a phase's env is
 closed before the next phase plays.
 
-1. **Training**: fleet episode ``i`` of the training stream of the run seed (its day drawn by its
-   reset seed among the training days) is played with exploration, and every guided EV's transitions
-   reach ``agent.observe`` with that EV's own episode state (:class:`~evcd.env.runners.fleet.FleetRunner`:
-   independent learners with one network and one replay). TensorBoard gets the fleet's ``charts/*``
+1. **Training**: the single target's training loop (:func:`~evcd.loops.train.train_episodes`) over
+   fleet episodes: episode ``i`` of the training stream of the run seed (its day drawn by its reset
+   seed among the training days) is played with exploration, and every guided EV's transitions reach
+   ``agent.observe`` with that EV's own episode state (:class:`~evcd.env.runners.fleet.FleetRunner`:
+   independent learners sharing one policy). TensorBoard gets the fleet's ``charts/*``
    per episode at ``global_step`` = agent steps seen. A checkpoint (agent with its replay and
    generators, the rows so far, the validations) is written every ``checkpoint_every`` episodes and
    at the end; ``resume=True`` continues from it, and since a fleet episode depends only on its seed
@@ -38,19 +39,16 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import time as wallclock
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, ClassVar
 
-from tqdm import tqdm
-
 from evcd.agents.base import Agent
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners.fleet import FleetEpisode, FleetRunner
-from evcd.loops.best_policy import check_learned, keep_if_best, policy_to_evaluate
+from evcd.loops.best_policy import check_learned, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.fleet import evaluate_fleet, fleet_spec
 from evcd.loops.fleet_figure import plot_fleet_traces
@@ -63,10 +61,10 @@ from evcd.loops.run_files import (
     baseline_csv,
     rows_csv_text,
 )
-from evcd.loops.seeds import TRAIN_STREAM, VALIDATION_STREAM, bootstrap_rng, episode_spec
+from evcd.loops.seeds import TRAIN_STREAM, VALIDATION_STREAM, bootstrap_rng, episode_specs
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, paired_values
-from evcd.loops.train_log import TrainLog
-from evcd.loops.train_state import save_training, start_run, training_counters
+from evcd.loops.train import train_episodes
+from evcd.loops.train_state import start_run, training_counters
 from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings, finite_mean
 from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
 from evcd.utils.validation import check_int
@@ -122,6 +120,14 @@ class FleetTrainState:
     validation_s: float = 0.0
     rows: list[dict[str, Any]] = field(default_factory=list)  # FleetEpisode.row() per training episode
     validation: ValidationRecord = field(default_factory=ValidationRecord)
+
+    def record(self, episode: FleetEpisode) -> None:
+        """Keep a training fleet episode's flat row (:meth:`FleetEpisode.row`)."""
+        self.rows.append(episode.row())
+
+    def charged_travel(self) -> list[float]:
+        """The guided EVs' mean travel time of each training episode where one charged."""
+        return [t for r in self.rows if math.isfinite(t := float(r["guided_travel"]))]
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values for the checkpoint."""
@@ -191,60 +197,6 @@ class FleetValidator:
                  point.mean, len(point.travel_times), rules)  # fmt: skip
 
 
-def _train(
-    agent: Agent,
-    envs: Mapping[str, FleetEnv],
-    settings: FleetTrainSettings,
-    run_dir: Path,
-    state: FleetTrainState,
-    config: Mapping[str, Any] | None,
-    tlog: TrainLog,
-    validator: FleetValidator | None,
-) -> None:
-    every = settings.checkpoint_every or settings.episodes
-    runner = FleetRunner(envs["train"])
-    state.sessions += 1
-    tlog.start(agent.stats())
-    bar = tqdm(total=settings.episodes, initial=state.episodes_done, desc=f"fleet train {agent.name}",
-               unit="ep", disable=not settings.progress)  # fmt: skip
-    try:
-        t0 = wallclock.perf_counter()
-        runner.prepare()
-        state.prepare_s += wallclock.perf_counter() - t0
-        while state.episodes_done < settings.episodes:
-            i = state.episodes_done
-            spec = episode_spec(settings.seed, i, TRAIN_STREAM)
-            ep = runner.episode(spec, agent, explore=True, learn=True)
-            state.rows.append(ep.row())
-            state.episodes_done += 1
-            state.transitions += ep.transitions
-            state.wall_s += ep.wall_s
-            tlog.fleet_episode(
-                state.rows[-1], agent.stats(), state.transitions, state.wall_s, agent.scalars()
-            )
-            bar.set_postfix(guided=f"{ep.measures.guided_travel:.0f}s", refresh=False)
-            bar.update(1)
-            done = state.episodes_done
-            if done % every and done < settings.episodes:
-                continue
-            if validator is not None and validator.due(done, settings.episodes):
-                runner.close()  # one simulation per process
-                t1 = wallclock.perf_counter()
-                validator.validate(agent, done, state.transitions, state.validation)
-                state.validation_s += wallclock.perf_counter() - t1
-                tlog.validation(state.validation, state.transitions)
-                keep_if_best(run_dir, agent, settings.validation, state.validation)
-            tlog.flush()
-            save_training(run_dir, agent, state, config)
-    except KeyboardInterrupt:
-        log.warning("interrupted after %d fleet training episodes; resume=true continues from the last "
-                    "checkpoint", state.episodes_done)  # fmt: skip
-        raise
-    finally:
-        bar.close()
-        runner.close()
-
-
 def train_and_evaluate_fleet(
     agent: Agent,
     envs: Mapping[str, FleetEnv],
@@ -274,7 +226,9 @@ def train_and_evaluate_fleet(
             if settings.validation.every:
                 validator = FleetValidator(envs["validation"], settings.validation, settings.seed,
                                            validation_rules or {})  # fmt: skip
-            _train(agent, envs, settings, run_dir, state, config, tlog, validator)
+            specs = episode_specs(settings.seed, range(settings.episodes), TRAIN_STREAM)
+            train_episodes(agent, lambda: FleetRunner(envs["train"]), specs, settings, run_dir, state, config,
+                           tlog, validator)  # fmt: skip
         check_learned(agent, episodes)
         selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
         training = {**_training_summary(agent, state, episodes), "evaluated_after_episodes": selected}

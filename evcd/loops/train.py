@@ -35,15 +35,15 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from evcd.agents.base import Agent
-from evcd.env.runners.base import EpisodeRow, EpisodeRunner, EpisodeSpec
+from evcd.env.runners.base import EpisodeRunner, EpisodeSpec
 from evcd.loops.best_policy import check_learned, keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
@@ -61,7 +61,7 @@ from evcd.loops.seeds import TRAIN_STREAM, bootstrap_rng, episode_specs
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult, paired_difference
 from evcd.loops.train_log import TrainLog
 from evcd.loops.train_state import TrainState, save_training, start_run, training_counters
-from evcd.loops.validation import ValidationSettings, Validator
+from evcd.loops.validation import ValidationRecord, ValidationSettings, Validator
 from evcd.utils.atomic import atomic_write_json, atomic_write_text
 from evcd.utils.validation import check_int
 
@@ -130,34 +130,67 @@ def training_specs(settings: TrainSettings) -> list[EpisodeSpec]:
     return [dataclasses.replace(s, options={"day": (s.index // every) % settings.rotate_days}) for s in specs]
 
 
-def _train(
+class TrainingState(Protocol):
+    """What the training loop keeps (:class:`~evcd.loops.train_state.TrainState`, and the fleet's
+    :class:`~evcd.loops.fleet_train.FleetTrainState`): counters, timings, the validations, and the
+    rows, which each state keeps in its own form (:meth:`record`)."""
+
+    episodes_done: int
+    transitions: int
+    wall_s: float
+    prepare_s: float
+    sessions: int
+    validation_s: float
+    validation: ValidationRecord
+
+    def record(self, row: Any) -> None: ...
+
+    def charged_travel(self) -> list[float]: ...
+
+
+class Validating(Protocol):
+    """A periodic validation (:class:`~evcd.loops.validation.Validator` and the fleet's)."""
+
+    def due(self, episodes_done: int, total: int) -> bool: ...
+
+    def validate(
+        self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord
+    ) -> None: ...
+
+
+def train_episodes(
     agent: Agent,
-    runners: RunnerFactory,
-    settings: TrainSettings,
+    runner: Callable[[], EpisodeRunner],
+    specs: Sequence[EpisodeSpec],
+    settings: Any,
     run_dir: Path,
-    state: TrainState,
+    state: TrainingState,
     config: Mapping[str, Any] | None,
     tlog: TrainLog,
-    validator: Validator | None,
+    validator: Validating | None,
 ) -> None:
-    """Play the training episodes from ``state.episodes_done`` on, with checkpoints (and validations)."""
-    every = settings.checkpoint_every or settings.episodes
-    specs = training_specs(settings)
-    bar = EpisodeProgress(settings.episodes, f"train {agent.name}", settings.progress,
-                          initial=state.episodes_done, window=settings.log_window)  # fmt: skip
-    bar.travel = [r.travel_time for r in state.rows if not r.truncated]
+    """The training loop of both tasks: play ``specs`` from ``state.episodes_done`` on, exploring and
+    learning, ``settings.checkpoint_every`` per call of the runner (``runner()`` makes it), with the
+    periodic validation (``validator``), the best policy kept (:mod:`evcd.loops.best_policy`) and a
+    checkpoint after every call. ``settings``: ``episodes``, ``checkpoint_every``, ``progress``,
+    ``validation`` and, optionally, ``log_window`` (the bar's mean)."""
+    episodes = len(specs)
+    every = settings.checkpoint_every or episodes
+    bar = EpisodeProgress(episodes, f"train {agent.name}", settings.progress, initial=state.episodes_done,
+                          window=getattr(settings, "log_window", None))  # fmt: skip
+    bar.travel = state.charged_travel()
     state.sessions += 1
     saved = state.episodes_done  # the position of the checkpoint this session started from
     tlog.start(agent.stats())
-    runner = runners("train")
+    played = runner()
     try:
         t0 = time.perf_counter()
-        runner.prepare()
+        played.prepare()
         state.prepare_s += time.perf_counter() - t0
         session_start, wall_before, validation_before = time.perf_counter(), state.wall_s, state.validation_s
 
-        def on_episode(row: EpisodeRow) -> None:
-            state.rows.append(row)
+        def on_episode(row: Any) -> None:
+            state.record(row)
             state.episodes_done += 1
             state.transitions += row.steps
             paused = state.validation_s - validation_before
@@ -165,12 +198,12 @@ def _train(
             tlog.episode(row, agent.stats(), state.transitions, state.wall_s, agent.scalars())
             bar(row)
 
-        while state.episodes_done < settings.episodes:
+        while state.episodes_done < episodes:
             start = state.episodes_done
-            stop = min(settings.episodes, (start // every + 1) * every)
-            runner.run(specs[start:stop], agent, explore=True, learn=True, on_episode=on_episode)
-            if validator is not None and validator.due(state.episodes_done, settings.episodes):
-                runner.close()  # one simulation per process: the next call starts its own again
+            stop = min(episodes, (start // every + 1) * every)
+            played.run(specs[start:stop], agent, explore=True, learn=True, on_episode=on_episode)
+            if validator is not None and validator.due(state.episodes_done, episodes):
+                played.close()  # one simulation per process: the next call starts its own again
                 t1 = time.perf_counter()
                 validator.validate(agent, state.episodes_done, state.transitions, state.validation)
                 state.validation_s += time.perf_counter() - t1
@@ -186,7 +219,7 @@ def _train(
         raise
     finally:
         bar.close()
-        runner.close()
+        played.close()
 
 
 # ---------------------------------------------------------------------------------------- the whole run
@@ -230,8 +263,8 @@ def train_and_evaluate(
             validator = None
             if settings.validation.every:
                 validator = Validator(runners, settings.validation, settings.seed, validation_rules or {})
-            _train(agent, runners, dataclasses.replace(settings, episodes=episodes), run_dir, state, config,
-                   tlog, validator)  # fmt: skip
+            train_episodes(agent, lambda: runners("train"), training_specs(settings), settings, run_dir,
+                           state, config, tlog, validator)  # fmt: skip
         check_learned(agent, episodes)
         selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
         evaluation, bases = _evaluate(agent, runners, settings, baselines or {})

@@ -31,7 +31,6 @@ from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 
-from evcd.env.runners.base import EpisodeRow
 from evcd.loops.validation import ValidationRecord
 
 
@@ -63,35 +62,18 @@ class TrainLog:
 
     def episode(
         self,
-        row: EpisodeRow,
+        row: Any,
         stats: Mapping[str, float],
         step: int,
         wall_s: float,
         scalars: Mapping[str, float] | None = None,
     ) -> None:
-        """Log one training episode (``stats`` and ``scalars``: the agent's
-        :meth:`~evcd.agents.Agent.stats` and :meth:`~evcd.agents.Agent.scalars` after it)."""
-        w = self.writer
-        w.add_scalar("charts/travel_time", row.travel_time, step)
-        w.add_scalar("charts/episodic_return", row.episode_return, step)
-        w.add_scalar("charts/queue_wait", row.queue_wait, step)
-        w.add_scalar("charts/switches", row.switches, step)
-        w.add_scalar("charts/truncated", float(row.truncated), step)
-        self._learner(stats, step, wall_s, scalars)
-
-    def fleet_episode(
-        self,
-        row: Mapping[str, Any],
-        stats: Mapping[str, float],
-        step: int,
-        wall_s: float,
-        scalars: Mapping[str, float] | None = None,
-    ) -> None:
-        """Log one training fleet episode (``row``: :meth:`~evcd.loops.fleet.FleetEpisode.row`)."""
-        for key in ("guided_travel", "all_travel", "queue_wait", "herding", "switches", "truncated"):
-            value = float(row[key])
-            if math.isfinite(value):
-                self.writer.add_scalar(f"charts/{key}", value, step)
+        """Log one training episode of either task (``row.charts()``: an
+        :class:`~evcd.env.runners.base.EpisodeRow` or a fleet episode,
+        :class:`~evcd.env.runners.fleet.FleetEpisode`); ``stats`` and ``scalars``: the agent's
+        :meth:`~evcd.agents.Agent.stats` and :meth:`~evcd.agents.Agent.scalars` after it."""
+        for key, value in row.charts().items():
+            self.writer.add_scalar(f"charts/{key}", value, step)
         self._learner(stats, step, wall_s, scalars)
 
     def _learner(

@@ -60,6 +60,14 @@ class TrainState:
     rows: list[EpisodeRow] = dataclasses.field(default_factory=list)
     validation: ValidationRecord = dataclasses.field(default_factory=ValidationRecord)
 
+    def record(self, row: EpisodeRow) -> None:
+        """Keep a training episode's row."""
+        self.rows.append(row)
+
+    def charged_travel(self) -> list[float]:
+        """The travel times of the training episodes that ended charging."""
+        return [r.travel_time for r in self.rows if not r.truncated]
+
     def to_dict(self) -> dict[str, Any]:
         """Plain values for the checkpoint."""
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

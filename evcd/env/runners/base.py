@@ -118,6 +118,12 @@ class EpisodeRow:
         """Decisions (transitions) in the episode."""
         return len(self.choices.split("-")) if self.choices else 0
 
+    def charts(self) -> dict[str, float]:
+        """What a training curve shows of the episode (TensorBoard ``charts/<key>``)."""
+        return {"travel_time": self.travel_time, "episodic_return": self.episode_return,
+                "queue_wait": self.queue_wait, "switches": float(self.switches),
+                "truncated": float(self.truncated)}  # fmt: skip
+
 
 EpisodeCallback = Callable[[EpisodeRow], None]
 

@@ -17,6 +17,7 @@ guided EV, in the order it appears, gets its own generator.
 
 from __future__ import annotations
 
+import math
 import time as wallclock
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -57,6 +58,27 @@ class FleetEpisode:
         """One flat row (for CSV / JSON)."""
         return {"episode": self.index, "day": self.day, "transitions": self.transitions,
                 "wall_s": round(self.wall_s, 3), **self.measures.to_dict()}  # fmt: skip
+
+    @property
+    def steps(self) -> int:
+        """Agent steps (decisions) in the episode, as :attr:`EpisodeRow.steps`."""
+        return self.transitions
+
+    @property
+    def travel_time(self) -> float:
+        """The guided EVs' mean travel time (NaN if none charged): the episode's score."""
+        return float(self.measures.guided_travel)
+
+    @property
+    def truncated(self) -> bool:
+        """No guided EV charged."""
+        return not math.isfinite(self.travel_time)
+
+    def charts(self) -> dict[str, float]:
+        """What a training curve shows of the episode (TensorBoard ``charts/<key>``; finite values)."""
+        row = self.row()
+        keys = ("guided_travel", "all_travel", "queue_wait", "herding", "switches", "truncated")
+        return {k: float(row[k]) for k in keys if math.isfinite(float(row[k]))}
 
 
 class FleetRunner(EpisodeRunner):
