@@ -17,10 +17,11 @@ closed before the next phase plays.
    generators, the rows so far, the validations) is written every ``checkpoint_every`` episodes and
    at the end; ``resume=True`` continues from it, and since a fleet episode depends only on its seed
    and the agent's state, a resumed run ends with the weights of an uninterrupted one (tested).
-2. **Validation** (every ``validation.every`` episodes and at the end): the policy without exploration
-   on fixed fleet episodes of the tuning days (taken in turn: :func:`~evcd.loops.fleet.fleet_spec`), the
-   rules once on the same episodes; each point is the mean over episodes of the guided EVs' mean travel
-   time. It neither explores nor learns, so it does not change the weights (tested).
+2. **Validation** (every ``validation.every`` episodes and at the end; the single target's
+   :class:`~evcd.loops.validation.Validator`): the policy without exploration on fixed fleet episodes
+   of the tuning days (taken in turn: :func:`~evcd.loops.fleet.fleet_spec`), the rules once on the same
+   episodes; each point is the mean over episodes of the guided EVs' mean travel time. It neither
+   explores nor learns, so it does not change the weights (tested).
 3. **Evaluation**: the agent (with ``validation.select_best``, the policy of its best validation:
    :mod:`evcd.loops.best_policy`) without exploration on the evaluation stream's fleet episodes (the ones
    ``scripts/evaluate.py task=fleet`` plays for the seed), each baseline on the very same episodes (same
@@ -65,7 +66,7 @@ from evcd.loops.seeds import TRAIN_STREAM, VALIDATION_STREAM, bootstrap_rng, epi
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, paired_values
 from evcd.loops.train import train_episodes
 from evcd.loops.train_state import start_run, training_counters
-from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings, finite_mean
+from evcd.loops.validation import ValidationRecord, ValidationSettings, Validator, finite_mean
 from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
 from evcd.utils.validation import check_int
 
@@ -157,46 +158,6 @@ class FleetTrainResult:
     training: dict[str, Any]
 
 
-class FleetValidator:
-    """The fleet's periodic held-out validation (see the module docstring).
-
-    Args:
-        env: the validation days' fleet (closed after every validation).
-        settings: how often and how many fleet episodes.
-        seed: the run seed (episodes of the validation stream).
-        rules: the rules played once on the same episodes, by name.
-    """
-
-    def __init__(
-        self, env: FleetEnv, settings: ValidationSettings, seed: int, rules: Mapping[str, Agent]
-    ) -> None:
-        self.runner, self.settings, self.rules = FleetRunner(env), settings, dict(rules)
-        days = len(env.days)
-        self.specs = [fleet_spec(seed, i, days, VALIDATION_STREAM) for i in range(settings.episodes)]
-
-    def due(self, episodes_done: int, total: int) -> bool:
-        """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""
-        return self.settings.due(episodes_done, total)
-
-    def _travel(self, agent: Agent) -> list[float]:
-        return [ep.measures.guided_travel for ep in self.runner.run(self.specs, agent)]
-
-    def validate(self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord) -> None:
-        """Play the validation episodes with ``agent`` (and, the first time, the rules); add a point."""
-        try:
-            self.runner.prepare()
-            for name, rule in self.rules.items():
-                if name not in record.rules:
-                    record.rules[name] = self._travel(rule)
-            point = ValidationPoint(episodes_done, transitions, self._travel(agent))
-        finally:
-            self.runner.close()
-        record.points.append(point)
-        rules = ", ".join(f"{n} {finite_mean(t):.1f} s" for n, t in record.rules.items())
-        log.info("validation after %d fleet episodes: guided EVs %.1f s over %d episodes (%s)", episodes_done,
-                 point.mean, len(point.travel_times), rules)  # fmt: skip
-
-
 def train_and_evaluate_fleet(
     agent: Agent,
     envs: Mapping[str, FleetEnv],
@@ -224,8 +185,11 @@ def train_and_evaluate_fleet(
         if episodes and state.episodes_done < episodes:
             validator = None
             if settings.validation.every:
-                validator = FleetValidator(envs["validation"], settings.validation, settings.seed,
-                                           validation_rules or {})  # fmt: skip
+                days = len(envs["validation"].days)
+                checks = [fleet_spec(settings.seed, i, days, VALIDATION_STREAM)
+                          for i in range(settings.validation.episodes)]  # fmt: skip
+                validator = Validator(lambda phase: FleetRunner(envs[phase]), settings.validation,
+                                      settings.seed, validation_rules or {}, checks)  # fmt: skip
             specs = episode_specs(settings.seed, range(settings.episodes), TRAIN_STREAM)
             train_episodes(agent, lambda: FleetRunner(envs["train"]), specs, settings, run_dir, state, config,
                            tlog, validator)  # fmt: skip

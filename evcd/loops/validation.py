@@ -17,14 +17,14 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from evcd.agents.base import Agent
-from evcd.env.runners import EpisodeRow, EpisodeRunner
+from evcd.env.runners import EpisodeRunner, EpisodeSpec
 from evcd.loops.seeds import VALIDATION_STREAM, episode_specs
 from evcd.utils.validation import check_int
 
@@ -138,7 +138,7 @@ def _json(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def _travel_times(rows: list[EpisodeRow]) -> list[float]:
+def _travel_times(rows: Sequence[Any]) -> list[float]:
     return [math.nan if r.truncated else float(r.travel_time) for r in rows]
 
 
@@ -151,6 +151,11 @@ class Validator:
         settings: how often and how many episodes.
         seed: the run seed.
         rules: the rules validated once on the same episodes, by name.
+        specs: the validation episodes (default: the first ``settings.episodes`` of the validation
+            stream of ``seed``; the fleet's take its days in turn, :func:`evcd.loops.fleet.fleet_spec`).
+
+    A validation value is a row's ``travel_time`` (NaN where it is ``truncated``): the target's travel
+    time, or a fleet episode's guided EVs' mean.
     """
 
     def __init__(
@@ -159,10 +164,12 @@ class Validator:
         settings: ValidationSettings,
         seed: int,
         rules: Mapping[str, Agent],
+        specs: Sequence[EpisodeSpec] | None = None,
     ) -> None:
         self.runners = runners
         self.settings = settings
-        self.specs = episode_specs(seed, range(settings.episodes), VALIDATION_STREAM)
+        self.specs = list(specs) if specs is not None else episode_specs(seed, range(settings.episodes),
+                                                                         VALIDATION_STREAM)  # fmt: skip
         self.rules = dict(rules)
 
     def due(self, episodes_done: int, total: int) -> bool:
