@@ -39,19 +39,11 @@ from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.env.runners.fleet import FleetRunner
 from evcd.loops.evaluate import evaluate
-from evcd.loops.fleet import evaluate_fleet, fleet_dispatcher_learns
-from evcd.loops.fleet_figure import plot_fleet_traces
+from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
-from evcd.loops.run_files import (
-    EVAL_CSV,
-    FLEET_CSV,
-    FLEET_PNG,
-    RESULTS_JSON,
-    write_episodes_csv,
-    write_fleet_files,
-    write_results_json,
-)
+from evcd.loops.run_files import FLEET_PNG, RESULTS_JSON, write_episodes_csv, write_results_json
 from evcd.loops.seeds import agent_rng
+from evcd.loops.tasks import TASKS
 from evcd.report.scenario import format_table
 from evcd.utils.checkpoint import CheckpointError
 from evcd.utils.validation import check_int
@@ -94,91 +86,76 @@ def trained_policy(
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
-    """Evaluate the agent described by ``cfg``; write its files into ``out_dir``; return the summary."""
-    if cfg.task == "fleet":
-        return run_fleet(cfg, out_dir)
+    """Evaluate the agent described by ``cfg`` (either task); write its files into ``out_dir``; return
+    the summary with its headline as ``mean_travel_time`` (with ``task=fleet``: the guided EVs')."""
     # every check before SUMO starts
     episodes = check_int("episodes", cfg.episodes, minimum=1)
     seed = check_int("seed", cfg.seed, minimum=0)
     resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
-    name, params = agent_params(cfg)  # unknown agent -> ValueError listing the known ones
-    params, policy = trained_policy(name, params, dispatcher_learns(name))
-    engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
-    files = [out_dir / EVAL_CSV, out_dir / RESULTS_JSON]
+    task = TASKS["fleet" if cfg.task == "fleet" else "single"]
+    name, agent, runner = _fleet_dispatcher(cfg, seed) if task.name == "fleet" else _dispatcher(cfg, seed)
+    files = [out_dir / task.eval_csv, out_dir / RESULTS_JSON]
+    if task.name == "fleet":
+        files.append(out_dir / FLEET_PNG)
     for path in files:
         if path.exists():
             raise FileExistsError(f"{path} exists: evaluate into a fresh run directory")
-    env = ChargingNavEnv(**env_kwargs(cfg))  # validates every env value; loads the scenario, no SUMO
-    agent = make_dispatcher(name, env, agent_rng(seed), **params)
-    if policy is not None:
-        agent.load_state_dict(policy, policy_only=True)
     write_run_record(out_dir, cfg)  # every check passed
-    log.info("%s on %s, evs=%s, %d episodes, seed %d", agent, env.scenario.root, cfg.evs, episodes, seed)
-
-    runner = make_runner(env, engine, batch)
+    log.info("%s%s on %s, evs=%s, %d episodes, seed %d", "fleet: " if task.name == "fleet" else "", agent,
+             runner.env.scenario.root, cfg.evs, episodes, seed)  # fmt: skip
     try:
         runner.prepare()  # build the day snapshots now, so that no episode's wall time includes them
         result = evaluate(runner, agent, episodes, seed, progress=bool(cfg.progress), resamples=resamples)
     finally:
         runner.close()
-
     write_episodes_csv(result, files[0])
     write_results_json(result, files[1], config=OmegaConf.to_container(cfg, resolve=True))
+    task.figures(out_dir, result, {}, runner)
     s = result.summary
-    log.info("episodes:\n%s", format_table([_brief(r) for r in result.rows], "{:.0f}"))
-    log.info(
-        "%s, evs=%s, seed=%d: mean travel time %.1f s (95%% CI %.1f-%.1f), median %.1f s, over %d of %d "
-        "episodes (%d truncated); %.2f s per episode",
-        name, cfg.evs, seed, s.mean_travel_time, s.ci_low, s.ci_high, s.median_travel_time,
-        s.completed, s.episodes, s.truncated, s.mean_wall_s,
-    )  # fmt: skip
-    log.info("wrote %s and %s", *files)
-    return dataclasses.asdict(s)
+    if task.name == "fleet":
+        log.info("episodes:\n%s", format_table([r.row() for r in result.rows], "{:.1f}"))
+        log.info(
+            "fleet %s, evs=%s, guided_share %s, seed %d: guided EVs %.1f s (95%% CI %.1f-%.1f), all EVs "
+            "%.1f s, herding %.2f, %d of %d guided EVs truncated; %.1f s per episode",
+            name, cfg.evs, runner.env.guided_share, seed, s.guided_travel, *s.guided_travel_ci, s.all_travel,
+            s.herding, s.truncated, s.guided, s.mean_wall_s,
+        )  # fmt: skip
+    else:
+        log.info("episodes:\n%s", format_table([_brief(r) for r in result.rows], "{:.0f}"))
+        log.info(
+            "%s, evs=%s, seed=%d: mean travel time %.1f s (95%% CI %.1f-%.1f), median %.1f s, over %d of %d "
+            "episodes (%d truncated); %.2f s per episode",
+            name, cfg.evs, seed, s.mean_travel_time, s.ci_low, s.ci_high, s.median_travel_time,
+            s.completed, s.episodes, s.truncated, s.mean_wall_s,
+        )  # fmt: skip
+    log.info("wrote %s", ", ".join(map(str, files)))
+    return {**dataclasses.asdict(s), "mean_travel_time": task.score(s)}
 
 
-def run_fleet(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
-    """``task=fleet``: play fleet episodes with one dispatcher for every guided EV; write
-    ``fleet_episodes.csv``, ``results.json`` and ``fleet_trace.png`` into ``out_dir``."""
-    episodes = check_int("episodes", cfg.episodes, minimum=1)
-    seed = check_int("seed", cfg.seed, minimum=0)
-    resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
+def _dispatcher(cfg: DictConfig, seed: int) -> tuple[str, Any, Any]:
+    """The single target's dispatcher (with its trained policy) and runner; no SUMO yet."""
+    name, params = agent_params(cfg)  # unknown agent -> ValueError listing the known ones
+    params, policy = trained_policy(name, params, dispatcher_learns(name))
+    engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
+    env = ChargingNavEnv(**env_kwargs(cfg))  # validates every env value; loads the scenario, no SUMO
+    agent = make_dispatcher(name, env, agent_rng(seed), **params)
+    if policy is not None:
+        agent.load_state_dict(policy, policy_only=True)
+    return name, agent, make_runner(env, engine, batch)
+
+
+def _fleet_dispatcher(cfg: DictConfig, seed: int) -> tuple[str, Any, FleetRunner]:
+    """``task=fleet``: one dispatcher for every guided EV (with its trained policy) and the fleet's
+    runner; no SUMO yet."""
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = str(params.pop("name"))
     params, policy = trained_policy(name, params, fleet_dispatcher_learns(name))
-    files = [out_dir / FLEET_CSV, out_dir / RESULTS_JSON, out_dir / FLEET_PNG]
-    for path in files:
-        if path.exists():
-            raise FileExistsError(f"{path} exists: evaluate into a fresh run directory")
     env = FleetEnv(**fleet_kwargs(cfg))  # validates every value; loads the scenario, no SUMO
     env.check_days()  # every day has EVs to guide (its routes, no SUMO)
     agent = make_agent_for_env(name, env, agent_rng(seed), **params)
     if policy is not None:
         agent.load_state_dict(policy, policy_only=True)
-    write_run_record(out_dir, cfg)  # every check passed
-    log.info("fleet: %s on %s, evs=%s, guided_share %s, %d episodes, seed %d", agent, env.scenario.root,
-             cfg.evs, env.guided_share, episodes, seed)  # fmt: skip
-    try:
-        env.prepare()
-        played, summary = evaluate_fleet(FleetRunner(env), agent, episodes, seed, progress=bool(cfg.progress),
-                                         resamples=resamples)  # fmt: skip
-    finally:
-        env.close()
-    rows = [ep.row() for ep in played]
-    write_fleet_files(rows, summary, files[0], files[1], OmegaConf.to_container(cfg, resolve=True))
-    title = (
-        f"{name}, evs={cfg.evs}, guided_share {env.guided_share}, seed {seed}, day {played[0].day}, episode 0"
-    )
-    plot_fleet_traces({name: played[0].trace}, [st.id for st in env.stations], files[2], title=title)
-    log.info("episodes:\n%s", format_table(rows, "{:.1f}"))
-    log.info(
-        "fleet %s, evs=%s, guided_share %s, seed %d: guided EVs %.1f s (95%% CI %.1f-%.1f), all EVs %.1f s, "
-        "herding %.2f, %d of %d guided EVs truncated; %.1f s per episode",
-        name, cfg.evs, env.guided_share, seed, summary["guided_travel"], *summary["guided_travel_ci"],
-        summary["all_travel"], summary["herding"], summary["truncated"], summary["guided"],
-        summary["mean_wall_s"],
-    )  # fmt: skip
-    log.info("wrote %s, %s and %s", *files)
-    return {**summary, "mean_travel_time": summary["guided_travel"]}
+    return name, agent, FleetRunner(env)
 
 
 def _brief(row: Any) -> dict[str, Any]:

@@ -35,11 +35,11 @@ from evcd.cli.run_record import write_run_record
 from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
-from evcd.env.runners import check_engine, make_runner
+from evcd.env.runners import FleetRunner, check_engine, make_runner
 from evcd.loops.fleet import fleet_dispatcher_learns
-from evcd.loops.fleet_train import FleetTrainSettings, train_and_evaluate_fleet
 from evcd.loops.hindsight import dispatcher_learns, dispatcher_names, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng, days_of_seed
+from evcd.loops.tasks import TASKS
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
 from evcd.utils.checkpoint import CheckpointError
@@ -104,13 +104,15 @@ def _window(cfg: DictConfig, key: str) -> dict[str, Any]:
 
 
 def _settings(cfg: DictConfig, seed: int, min_episodes: int) -> dict[str, Any]:
-    """The settings both trainers take (:class:`TrainSettings`, :class:`FleetTrainSettings`), checked."""
+    """The :class:`TrainSettings` of both tasks, checked (a fleet run has ``min_episodes`` 1: it is
+    made for a learner)."""
     return {
         "episodes": check_int("train.episodes", cfg.train.episodes, minimum=min_episodes),
         "eval_episodes": check_int("eval.episodes", cfg.eval.episodes, minimum=1),
         "seed": seed,
         "checkpoint_every": check_int("train.checkpoint_every", cfg.train.checkpoint_every, minimum=0),
         "progress": bool(cfg.progress),
+        "log_window": check_int("train.log_window", cfg.train.log_window, minimum=1),
         "resamples": check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
         "validation": ValidationSettings(
             cfg.train.validation.every, cfg.train.validation.episodes, cfg.train.validation.select_best
@@ -124,7 +126,6 @@ def build(cfg: DictConfig) -> dict[str, Any]:
     train_days, eval_days = _days(cfg, seed)
     settings = TrainSettings(
         **_settings(cfg, seed, min_episodes=0),
-        log_window=check_int("train.log_window", cfg.train.log_window, minimum=1),
         rotate_days=len(train_days) if bool(cfg.train.rotate_days) else 0,
     )
     check_int("torch_threads", cfg.torch_threads, minimum=1)
@@ -202,7 +203,7 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
     """``task=fleet``: everything the fleet run needs, checked before any simulation starts."""
     seed = check_int("seed", cfg.seed, minimum=0)
     train_days, eval_days = _days(cfg, seed)
-    settings = FleetTrainSettings(**_settings(cfg, seed, min_episodes=1))
+    settings = TrainSettings(**_settings(cfg, seed, min_episodes=1))
     check_int("torch_threads", cfg.torch_threads, minimum=1)
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = str(params.pop("name"))
@@ -229,31 +230,13 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
         env.check_days()  # every day has EVs to guide (its route file; no SUMO)
     agent = make_agent_for_env(name, envs["train"], agent_rng(seed), **params)
     baselines = {str(r): _fleet_rule(r, envs["eval"], seed, "eval.baselines") for r in cfg.eval.baselines}
-    return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules}
-
-
-def train_fleet(cfg: DictConfig, out_dir: Path) -> float:
-    """``task=fleet``: train (a learner) and evaluate on fleet episodes; return the guided EVs' mean
-    travel time over the evaluation."""
-    parts = build_fleet(cfg)
-    torch.set_num_threads(int(cfg.torch_threads))
-    envs, agent, settings = parts["envs"], parts["agent"], parts["settings"]
-    log.info("fleet: %r on %s, evs=%s, guided_share %s, train days %s, eval days %s, seed %d -> %s", agent,
-             envs["train"].scenario.root, cfg.evs, envs["train"].guided_share,
-             list(envs["train"].config.demand_seeds), list(envs["eval"].config.demand_seeds), settings.seed,
-             out_dir)  # fmt: skip
-    config = OmegaConf.to_container(cfg, resolve=True)
-    result = train_and_evaluate_fleet(agent, envs, settings, out_dir, baselines=parts["baselines"],
-                                      resume=bool(cfg.resume), config=config, validation_rules=parts["rules"],
-                                      on_start=lambda: write_run_record(out_dir, cfg))  # fmt: skip
-    for line in fleet_report_lines(result, cfg.evs):
-        log.info("%s", line)
-    return float(result.summary["guided_travel"])
+    return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules,
+            "runner": lambda phase: FleetRunner(envs[phase])}  # fmt: skip
 
 
 def fleet_report_lines(result: Any, evs: int) -> list[str]:
     """A fleet run's outcome: training, the guided EVs' and everybody's travel times, the pairs."""
-    s, t = result.summary, result.training
+    s, t, seed = result.evaluation.summary, result.training, result.evaluation.seed
     lines = []
     if t["episodes"]:
         lines.append(
@@ -262,10 +245,10 @@ def fleet_report_lines(result: Any, evs: int) -> list[str]:
             f"builds {t['day_build_s']:.0f} s, validation {t['validation_s']:.0f} s)"
         )
     lines.append(
-        f"{result.agent}, evs={evs}, seed={s['seed']}: guided EVs {s['guided_travel']:.1f} s (95% CI "
-        f"{s['guided_travel_ci'][0]:.1f}-{s['guided_travel_ci'][1]:.1f}), all EVs {s['all_travel']:.1f} s, "
-        f"herding {s['herding']:.2f}, {s['truncated']} of {s['guided']} guided EVs truncated, over "
-        f"{s['episodes']} fleet episodes"
+        f"{result.evaluation.agent}, evs={evs}, seed={seed}: guided EVs {s.guided_travel:.1f} s (95% CI "
+        f"{s.guided_travel_ci[0]:.1f}-{s.guided_travel_ci[1]:.1f}), all EVs {s.all_travel:.1f} s, "
+        f"herding {s.herding:.2f}, {s.truncated} of {s.guided} guided EVs truncated, over "
+        f"{s.episodes} fleet episodes"
     )
     for name, measures in result.paired.items():
         for key, p in measures.items():
@@ -282,14 +265,13 @@ def train(cfg: DictConfig) -> float:
     """Run the training described by ``cfg`` in Hydra's run directory; return the evaluation mean
     travel time (what a sweeper minimises; with ``task=fleet`` the guided EVs')."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    if check_task(cfg) == "fleet":
-        return train_fleet(cfg, out_dir)
-    parts = build(cfg)
+    fleet = check_task(cfg) == "fleet"
+    parts = build_fleet(cfg) if fleet else build(cfg)
     torch.set_num_threads(int(cfg.torch_threads))
-    envs = parts["envs"]
-    agent, settings = parts["agent"], parts["settings"]
-    log.info("%r on %s, evs=%s, train days %s, eval days %s, seed %d -> %s", agent,
-             envs["train"].scenario.root, cfg.evs, list(envs["train"].config.demand_seeds),
+    envs, agent, settings = parts["envs"], parts["agent"], parts["settings"]
+    share = f", guided_share {envs['train'].guided_share}" if fleet else ""
+    log.info("%s%r on %s, evs=%s%s, train days %s, eval days %s, seed %d -> %s", "fleet: " if fleet else "",
+             agent, envs["train"].scenario.root, cfg.evs, share, list(envs["train"].config.demand_seeds),
              list(envs["eval"].config.demand_seeds), settings.seed, out_dir)  # fmt: skip
     result = train_and_evaluate(
         agent,
@@ -302,9 +284,9 @@ def train(cfg: DictConfig) -> float:
         validation_rules=parts["rules"],
         on_start=lambda: write_run_record(out_dir, cfg),  # once the run directory passed its checks
     )
-    for line in report_lines(result, cfg.evs):
+    for line in (fleet_report_lines if fleet else report_lines)(result, cfg.evs):
         log.info("%s", line)
-    return float(result.evaluation.summary.mean_travel_time)
+    return TASKS[result.evaluation.task].score(result.evaluation.summary)
 
 
 def report_lines(result: Any, evs: int) -> list[str]:

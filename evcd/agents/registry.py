@@ -179,6 +179,9 @@ def check_agent_task(name: str, task: str) -> type[Agent]:
         ValueError: an unknown name, or an agent that does not read the task's observation (the
             message lists the agents that do).
     """
+    if name not in agent_names():
+        raise ValueError(f"agent {name!r} is not an agent of task={task}; the agents of task={task}: "
+                         f"{', '.join(agent_names(task))}")  # fmt: skip
     cls = agent_class(name)
     if TASK_BLOCKS[task] not in cls.obs_blocks:
         others = {3: "single", 4: "fleet"}

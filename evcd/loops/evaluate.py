@@ -9,7 +9,9 @@ dispatchers evaluated with the same seed are compared on the same episodes. Epis
 runner (:mod:`evcd.env.runners`); a dispatcher is an agent (played without exploration, and never
 learning: :meth:`~evcd.agents.Agent.observe` is not called) or the hindsight bound
 (:mod:`evcd.loops.hindsight`). Only episodes that end by charging enter the travel-time statistics
-(:mod:`evcd.loops.stats`); truncated ones are counted and listed.
+(:mod:`evcd.loops.stats`); truncated ones are counted and listed. The same function evaluates on the
+fleet (a :class:`~evcd.env.runners.fleet.FleetRunner`): its episodes take the days in turn and its
+summary is the fleet's (:mod:`evcd.loops.tasks`).
 """
 
 from __future__ import annotations
@@ -24,8 +26,9 @@ from evcd.agents.base import Agent
 from evcd.env.runners import EpisodeRow, EpisodeRunner, EpisodeSpec, SingleEnvRunner
 from evcd.loops.hindsight import HindsightBound
 from evcd.loops.progress import EpisodeProgress
-from evcd.loops.seeds import bootstrap_rng, check_seed, episode_spec, episode_specs
-from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult, summarize
+from evcd.loops.seeds import bootstrap_rng, check_seed, episode_spec
+from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult
+from evcd.loops.tasks import task_of
 from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
@@ -71,31 +74,34 @@ def evaluate(
 
     Args:
         env: a :class:`~evcd.env.ChargingNavEnv` (or any env with its ``info`` keys), or a runner
-            (:mod:`evcd.env.runners`). It is not closed here.
+            (:mod:`evcd.env.runners`, a fleet's included). It is not closed here.
         agent: the dispatcher: an agent, or the hindsight bound.
         episodes: number of episodes (>= 1).
         seed: the run seed (>= 0): the episodes and the bootstrap derive from it.
         progress: show a tqdm progress bar (on stderr).
         resamples: bootstrap resamples of the confidence interval.
         specs: the episodes to run (default: the first ``episodes`` of the evaluation stream of
-            ``seed``); ``episodes`` must equal their number.
+            ``seed``, the task's :meth:`~evcd.loops.tasks.Task.specs`); ``episodes`` must equal their
+            number.
 
     Raises:
         ValueError: ``episodes`` or ``seed`` out of range.
     """
     episodes = check_int("episodes", episodes, minimum=1)
     seed = check_seed(seed)
+    runner = as_runner(env)
+    task = task_of(runner)
     if specs is None:
-        specs = episode_specs(seed, range(episodes))
+        specs = task.specs(seed, episodes, runner)
     elif len(specs) != episodes:
         raise ValueError(f"episodes={episodes} but {len(specs)} specs given")
     runs = agent.runs_per_episode if isinstance(agent, HindsightBound) else 1
     bar = EpisodeProgress(len(specs) * runs, f"evaluate {agent.name}", progress)
     try:
-        rows, extra = play(as_runner(env), agent, specs, on_episode=bar)
+        rows, extra = play(runner, agent, specs, on_episode=bar)
     finally:
         bar.close()
     for row in rows:
-        log.debug("episode %d: %s", row.episode, row)
-    summary = summarize(rows, bootstrap_rng(seed), resamples)
-    return EvalResult(agent=agent.name, seed=seed, rows=tuple(rows), summary=summary, extra=extra)
+        log.debug("%s", row)
+    summary = task.summarize(rows, bootstrap_rng(seed), resamples)
+    return EvalResult(agent.name, seed, tuple(rows), summary, extra, task.name)

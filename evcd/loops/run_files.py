@@ -6,8 +6,8 @@ A run directory (``scripts/train.py``) holds ``train_episodes.csv``, ``episodes.
 ``learning_curve.png``, ``checkpoints/`` and ``tensorboard/``; ``scripts/evaluate.py`` writes
 ``episodes.csv`` and ``results.json``. A fleet run (``task=fleet``) writes ``train_fleet_episodes.csv``,
 ``fleet_episodes.csv``, ``baseline_<rule>_fleet_episodes.csv`` and ``fleet_trace.png`` instead of the
-episodes files (one row per fleet episode). Every file is written atomically; none already there is
-overwritten unless asked.
+episodes files (one row per fleet episode; :mod:`evcd.loops.tasks`). Every file is written
+atomically; none already there is overwritten unless asked.
 """
 
 from __future__ import annotations
@@ -56,14 +56,12 @@ def refuse_clobber(path: Path, overwrite: bool) -> None:
         raise FileExistsError(f"{path} exists: refusing to overwrite it (pass overwrite=True)")
 
 
-def episodes_csv_text(rows: Sequence[EpisodeRow]) -> str:
-    """``rows`` as CSV text with a header (floats written with ``repr`` precision)."""
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow(dataclasses.asdict(row))
-    return buf.getvalue()
+def episodes_csv_text(rows: Sequence[Any]) -> str:
+    """``rows`` (:class:`EpisodeRow`\\ s, or fleet episodes: anything with ``row()``) as CSV text with a
+    header (floats written with ``repr`` precision; no rows: the :class:`EpisodeRow` header)."""
+    if not rows:
+        return ",".join(CSV_FIELDS) + "\n"
+    return rows_csv_text([r.row() for r in rows])
 
 
 def read_episodes_csv(path: str | Path) -> list[EpisodeRow]:
@@ -85,7 +83,7 @@ def read_episodes_csv(path: str | Path) -> list[EpisodeRow]:
 
 
 def write_episodes_csv(result: EvalResult, path: str | Path, overwrite: bool = False) -> Path:
-    """Write the per-episode rows to ``path`` atomically.
+    """Write the per-episode rows (either task's) to ``path`` atomically.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is false.
@@ -96,14 +94,15 @@ def write_episodes_csv(result: EvalResult, path: str | Path, overwrite: bool = F
 
 
 def results_dict(result: EvalResult, config: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The content of ``results.json``: agent, seed, summary, per-episode rows, optional config, and
-    the agent's own extras (:attr:`EvalResult.extra`, e.g. ``hindsight``)."""
+    """The content of ``results.json``: task, agent, seed, summary, per-episode rows, optional config,
+    and the agent's own extras (:attr:`EvalResult.extra`, e.g. ``hindsight``)."""
     return json_floats(
         {
+            "task": result.task,
             "agent": result.agent,
             "seed": result.seed,
             "summary": dataclasses.asdict(result.summary),
-            "episodes": [dataclasses.asdict(r) for r in result.rows],
+            "episodes": [r.row() for r in result.rows],
             "config": dict(config) if config is not None else None,
             **result.extra,
         }
@@ -123,31 +122,8 @@ def write_results_json(
     return atomic_write_json(path, results_dict(result, config))
 
 
-def write_fleet_files(
-    rows: Sequence[Mapping[str, Any]],
-    summary: Mapping[str, Any],
-    csv_path: str | Path,
-    json_path: str | Path,
-    config: Mapping[str, Any] | None = None,
-) -> tuple[Path, Path]:
-    """A fleet evaluation's files (``scripts/evaluate.py task=fleet``): one CSV row per fleet episode
-    (:meth:`~evcd.loops.fleet.FleetEpisode.row`) and ``results.json`` (summary, rows, config; strict
-    JSON), both atomically.
-
-    Raises:
-        FileExistsError: either file exists.
-    """
-    csv_path, json_path = Path(csv_path), Path(json_path)
-    for path in (csv_path, json_path):
-        refuse_clobber(path, overwrite=False)
-    atomic_write_text(csv_path, rows_csv_text(rows))
-    payload = {"summary": dict(summary), "episodes": [dict(r) for r in rows], "config": config}
-    atomic_write_json(json_path, json_floats(payload))
-    return csv_path, json_path
-
-
 def rows_csv_text(rows: Sequence[Mapping[str, Any]]) -> str:
-    """Flat rows (the same keys each, e.g. :meth:`~evcd.loops.fleet.FleetEpisode.row`) as CSV text."""
+    """Flat rows (the same keys each, e.g. :meth:`~evcd.env.runners.fleet.FleetEpisode.row`) as CSV text."""
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else [], lineterminator="\n")
     writer.writeheader()

@@ -55,14 +55,18 @@ class EvalSummary:
 
 @dataclass(frozen=True)
 class EvalResult:
-    """Rows and summary of :func:`evaluate`."""
+    """Rows and summary of :func:`~evcd.loops.evaluate.evaluate`: the single target's
+    (:class:`EpisodeRow` rows, an :class:`EvalSummary`) or the fleet's
+    (:class:`~evcd.env.runners.fleet.FleetEpisode` rows, a :class:`~evcd.loops.fleet.FleetSummary`)."""
 
     agent: str
     seed: int
-    rows: tuple[EpisodeRow, ...]
-    summary: EvalSummary
+    rows: tuple[Any, ...]
+    summary: Any
     #: the agent's :meth:`~evcd.agents.Agent.report` (e.g. hindsight's station per episode)
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    #: the episodes' task (:mod:`evcd.loops.tasks`)
+    task: str = "single"
 
 
 def bootstrap_ci(

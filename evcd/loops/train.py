@@ -1,46 +1,50 @@
-"""Train an agent on training episodes, then evaluate it beside baseline rules on held-out episodes.
+"""Train an agent on training episodes, then evaluate it beside baseline rules on held-out episodes:
+one loop for both tasks (the single target and the fleet) and every agent.
 
     result = train_and_evaluate(agent, runners, TrainSettings(episodes=500, eval_episodes=50, seed=0),
                                 run_dir, baselines={"greedy": greedy_agent})
 
-``runners(phase)`` makes the :class:`~evcd.env.runners.base.EpisodeRunner` of a phase, ``"train"`` or
-``"eval"`` (libsumo runs one simulation per process, so the two are made one after the other, each
-closed before the next). By default the two phases run on different background days, so the
-evaluation measures the policy on traffic it never trained on.
+``runners(phase)`` makes the :class:`~evcd.env.runners.base.EpisodeRunner` of a phase, ``"train"``,
+``"eval"`` or ``"validation"`` (libsumo runs one simulation per process, so they are made one after
+the other, each closed before the next). By default the phases run on different background days, so
+the evaluation measures the policy on traffic it never trained on. The runners' task
+(:attr:`~evcd.env.runners.base.EpisodeRunner.task`) says what a row is and how it is summarised,
+paired and written (:mod:`evcd.loops.tasks`): a :class:`~evcd.env.runners.fleet.FleetRunner` makes a
+fleet run, where every guided EV's transitions reach the one shared learner.
 
 1. **Training** (agents with ``learns``): the training episodes of the run seed (stream
    :data:`~evcd.loops.seeds.TRAIN_STREAM`) are played with exploration, and every transition reaches
    ``agent.observe``. TensorBoard gets ``charts/*`` per episode and ``losses/*`` over the episode's
-   gradient steps, all at ``global_step`` = transitions seen. A checkpoint (agent state with its
-   replay and generators, the rows so far, the position in the seed sequence) is written every
-   ``checkpoint_every`` episodes and at the end (:mod:`evcd.loops.train_state`). ``resume=True``
-   continues from it; since an episode depends only on its seed
-   and the agent's state, an interrupted and resumed run ends with the same weights as an
-   uninterrupted one.
-2. **Evaluation**: the agent (with ``validation.select_best``, the policy of its best validation:
+   gradient steps, all at ``global_step`` = transitions seen (:mod:`evcd.loops.train_log`). A
+   checkpoint (agent state with its replay and generators, the rows so far, the validations) is
+   written every ``checkpoint_every`` episodes and at the end (:mod:`evcd.loops.train_state`).
+   ``resume=True`` continues from it; since an episode depends only on its seed and the agent's
+   state, an interrupted and resumed run ends with the same weights as an uninterrupted one.
+2. **Validation** (every ``validation.every`` episodes and at the end: :mod:`evcd.loops.validation`):
+   the policy without exploration on fixed episodes of the tuning days, the rules once beside it.
+3. **Evaluation**: the agent (with ``validation.select_best``, the policy of its best validation:
    :mod:`evcd.loops.best_policy`), without exploration, on the evaluation episodes (stream
    :data:`~evcd.loops.seeds.EVAL_STREAM`, the same episodes ``scripts/evaluate.py`` runs for that
-   seed), then each baseline rule (greedy, queue_aware) on the same episodes, and the paired
-   difference with each, with a bootstrap interval.
+   seed), then each baseline rule on the same episodes, and the paired difference with each, with a
+   bootstrap interval.
 
 Files in ``run_dir``: ``train_episodes.csv``, ``episodes.csv`` (the agent's evaluation),
 ``baseline_<rule>_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/``,
-``tensorboard/`` (and ``best/`` with ``validation.select_best``). Nothing already there is
-overwritten: a run directory that holds a checkpoint is only entered again with ``resume=True``.
+``tensorboard/`` (and ``best/`` with ``validation.select_best``); a fleet run writes
+``train_fleet_episodes.csv``, ``fleet_episodes.csv``, ``baseline_<rule>_fleet_episodes.csv`` and
+``fleet_trace.png`` instead of the episodes files. Nothing already there is overwritten: a run
+directory that holds a checkpoint is only entered again with ``resume=True``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
-
-import numpy as np
+from typing import Any
 
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRunner, EpisodeSpec
@@ -48,21 +52,14 @@ from evcd.loops.best_policy import check_learned, keep_if_best, policy_to_evalua
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
 from evcd.loops.progress import EpisodeProgress
-from evcd.loops.run_files import (
-    CURVE_PNG,
-    EVAL_CSV,
-    RESULTS_JSON,
-    TRAIN_CSV,
-    baseline_csv,
-    episodes_csv_text,
-    results_dict,
-)
-from evcd.loops.seeds import TRAIN_STREAM, bootstrap_rng, episode_specs
-from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult, paired_difference
+from evcd.loops.run_files import CURVE_PNG, RESULTS_JSON, episodes_csv_text, results_dict, rows_csv_text
+from evcd.loops.seeds import TRAIN_STREAM, episode_specs
+from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult
+from evcd.loops.tasks import Task, task_of
 from evcd.loops.train_log import TrainLog
 from evcd.loops.train_state import TrainState, save_training, start_run, training_counters
-from evcd.loops.validation import ValidationRecord, ValidationSettings, Validator
-from evcd.utils.atomic import atomic_write_json, atomic_write_text
+from evcd.loops.validation import ValidationSettings, Validator
+from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
 from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
@@ -130,54 +127,25 @@ def training_specs(settings: TrainSettings) -> list[EpisodeSpec]:
     return [dataclasses.replace(s, options={"day": (s.index // every) % settings.rotate_days}) for s in specs]
 
 
-class TrainingState(Protocol):
-    """What the training loop keeps (:class:`~evcd.loops.train_state.TrainState`, and the fleet's
-    :class:`~evcd.loops.fleet_train.FleetTrainState`): counters, timings, the validations, and the
-    rows, which each state keeps in its own form (:meth:`record`)."""
-
-    episodes_done: int
-    transitions: int
-    wall_s: float
-    prepare_s: float
-    sessions: int
-    validation_s: float
-    validation: ValidationRecord
-
-    def record(self, row: Any) -> None: ...
-
-    def charged_travel(self) -> list[float]: ...
-
-
-class Validating(Protocol):
-    """A periodic validation (:class:`~evcd.loops.validation.Validator` and the fleet's)."""
-
-    def due(self, episodes_done: int, total: int) -> bool: ...
-
-    def validate(
-        self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord
-    ) -> None: ...
-
-
 def train_episodes(
     agent: Agent,
     runner: Callable[[], EpisodeRunner],
     specs: Sequence[EpisodeSpec],
-    settings: Any,
+    settings: TrainSettings,
     run_dir: Path,
-    state: TrainingState,
+    state: TrainState,
     config: Mapping[str, Any] | None,
     tlog: TrainLog,
-    validator: Validating | None,
+    validator: Validator | None,
 ) -> None:
     """The training loop of both tasks: play ``specs`` from ``state.episodes_done`` on, exploring and
     learning, ``settings.checkpoint_every`` per call of the runner (``runner()`` makes it), with the
     periodic validation (``validator``), the best policy kept (:mod:`evcd.loops.best_policy`) and a
-    checkpoint after every call. ``settings``: ``episodes``, ``checkpoint_every``, ``progress``,
-    ``validation`` and, optionally, ``log_window`` (the bar's mean)."""
+    checkpoint after every call."""
     episodes = len(specs)
     every = settings.checkpoint_every or episodes
     bar = EpisodeProgress(episodes, f"train {agent.name}", settings.progress, initial=state.episodes_done,
-                          window=getattr(settings, "log_window", None))  # fmt: skip
+                          window=settings.log_window)  # fmt: skip
     bar.travel = state.charged_travel()
     state.sessions += 1
     saved = state.episodes_done  # the position of the checkpoint this session started from
@@ -234,7 +202,9 @@ def train_and_evaluate(
     validation_rules: Mapping[str, Agent] | None = None,
     on_start: Callable[[], None] | None = None,
 ) -> TrainResult:
-    """Train ``agent`` (if it learns), evaluate it and the ``baselines`` on the same held-out episodes.
+    """Train ``agent`` (if it learns), evaluate it and the ``baselines`` on the same held-out episodes,
+    on either task: the runners' (:attr:`~evcd.env.runners.base.EpisodeRunner.task`; the fleet's
+    rows, summaries, pairs and files are :mod:`evcd.loops.tasks`'s :class:`~evcd.loops.tasks.FleetTask`).
 
     Args:
         agent: the agent (a learner is trained first; a rule, or the hindsight bound, is only evaluated).
@@ -253,36 +223,41 @@ def train_and_evaluate(
     Raises:
         FileExistsError, FileNotFoundError: see :func:`check_run_dir`.
         ValueError: a resumed run's config differs from the checkpoint's, or a bad setting.
-        CheckpointError: the checkpoint is corrupted or does not fit the agent.
+        CheckpointError: the checkpoint is corrupted, of the other task, or does not fit the agent.
     """
     run_dir = Path(run_dir)
-    state, tlog = start_run(run_dir, agent, resume, config, TrainState, on_start)
+    task = task_of(runners("eval"))  # making a runner starts nothing
+    state, tlog = start_run(run_dir, agent, resume, config, task.state, on_start)
     episodes = settings.episodes if agent.learns else 0
     try:
         if episodes and state.episodes_done < episodes:
             validator = None
             if settings.validation.every:
-                validator = Validator(runners, settings.validation, settings.seed, validation_rules or {})
+                rules = validation_rules or {}
+                validator = Validator(runners, settings.validation, settings.seed, rules, task)
             train_episodes(agent, lambda: runners("train"), training_specs(settings), settings, run_dir,
                            state, config, tlog, validator)  # fmt: skip
         check_learned(agent, episodes)
         selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
-        evaluation, bases = _evaluate(agent, runners, settings, baselines or {})
-        paired = {name: paired_difference(evaluation.rows, base.rows, bootstrap_rng(settings.seed),
-                                          settings.resamples) for name, base in bases.items()}  # fmt: skip
-        training = {**_training_summary(agent, state, episodes), "evaluated_after_episodes": selected}
-        tlog.evaluation(evaluation, bases, paired, state.transitions)
+        runner = runners("eval")
+        evaluation, bases = _evaluate(agent, runner, settings, baselines or {})
+        paired = {name: task.paired(evaluation.rows, base.rows, settings.seed, settings.resamples)
+                  for name, base in bases.items()}  # fmt: skip
+        stats = agent.stats() if isinstance(agent, Agent) else {}
+        training = {**training_counters(stats, state, episodes), **state.summary(),
+                    "evaluated_after_episodes": selected}  # fmt: skip
+        tlog.scalars(task.score(evaluation.summary), {n: task.score(b.summary) for n, b in bases.items()},
+                     {n: task.score_pair(p) for n, p in paired.items()}, state.transitions)  # fmt: skip
     finally:
         tlog.close()
     result = TrainResult(evaluation, bases, paired, training)
-    _write_outputs(run_dir, result, state, config)
+    _write_outputs(run_dir, task, result, state, config, runner)
     return result
 
 
 def _evaluate(
-    agent: Dispatcher, runners: RunnerFactory, settings: TrainSettings, baselines: Mapping[str, Dispatcher]
+    agent: Dispatcher, runner: EpisodeRunner, settings: TrainSettings, baselines: Mapping[str, Dispatcher]
 ) -> tuple[EvalResult, dict[str, EvalResult]]:
-    runner = runners("eval")
     try:
         runner.prepare()
         kwargs = {"progress": settings.progress, "resamples": settings.resamples}
@@ -297,28 +272,23 @@ def _evaluate(
         runner.close()
 
 
-def _training_summary(agent: Dispatcher, state: TrainState, episodes: int) -> dict[str, Any]:
-    stats = agent.stats() if isinstance(agent, Agent) else {}
-    charged = [r.travel_time for r in state.rows if not r.truncated]
-    return {
-        **training_counters(stats, state, episodes),
-        "truncated": sum(r.truncated for r in state.rows),
-        "mean_travel_time": float(np.mean(charged)) if charged else math.nan,
-        "mean_switches": float(np.mean([r.switches for r in state.rows])) if state.rows else math.nan,
-    }
-
-
 def _write_outputs(
-    run_dir: Path, result: TrainResult, state: TrainState, config: Mapping[str, Any] | None
+    run_dir: Path,
+    task: Task,
+    result: TrainResult,
+    state: TrainState,
+    config: Mapping[str, Any] | None,
+    runner: EpisodeRunner,
 ) -> None:
+    agent = result.evaluation.agent
     if state.rows:
-        atomic_write_text(run_dir / TRAIN_CSV, episodes_csv_text(state.rows))
-        plot_learning_curve({result.evaluation.agent: state.rows}, run_dir / CURVE_PNG,
-                            title=f"{result.evaluation.agent}: travel time per training episode",
-                            validation=state.validation)  # fmt: skip
-    atomic_write_text(run_dir / EVAL_CSV, episodes_csv_text(result.evaluation.rows))
+        atomic_write_text(run_dir / task.train_csv, rows_csv_text(state.row_dicts()))
+        plot_learning_curve({agent: state.curve_rows()}, run_dir / CURVE_PNG, title=task.curve_title(agent),
+                            validation=state.validation, **task.curve)  # fmt: skip
+    atomic_write_text(run_dir / task.eval_csv, episodes_csv_text(result.evaluation.rows))
     for name, base in result.baselines.items():
-        atomic_write_text(run_dir / baseline_csv(name), episodes_csv_text(base.rows))
+        atomic_write_text(run_dir / task.baseline_csv(name), episodes_csv_text(base.rows))
+    task.figures(run_dir, result.evaluation, result.baselines, runner)
     out = results_dict(result.evaluation, config)
     out["training"] = result.training
     if state.validation.points:
@@ -326,4 +296,4 @@ def _write_outputs(
     if result.baselines:
         out["baselines"] = {name: {"summary": dataclasses.asdict(base.summary), "paired": result.paired[name]}
                             for name, base in result.baselines.items()}  # fmt: skip
-    atomic_write_json(run_dir / RESULTS_JSON, out)
+    atomic_write_json(run_dir / RESULTS_JSON, json_floats(out))

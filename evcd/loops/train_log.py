@@ -14,7 +14,7 @@ interrupted one wrote after its last checkpoint):
   ``eval/paired_difference_<rule>`` (agent minus rule on the same episodes);
 - the periodic held-out validation (:mod:`evcd.loops.validation`): ``eval/validation_travel_time``
   (the policy without exploration) and ``eval/validation_<rule>`` (the rules on the same episodes);
-- a fleet run (:mod:`evcd.loops.fleet_train`), per training fleet episode: ``charts/guided_travel``,
+- a fleet run (:class:`~evcd.loops.tasks.FleetTask`), per training fleet episode: ``charts/guided_travel``,
   ``charts/all_travel``, ``charts/queue_wait``, ``charts/herding``, ``charts/switches`` (per guided
   EV), ``charts/truncated`` (guided EVs), with the same epsilon, speed and losses; its validation
   and evaluation use the ``eval/`` tags above (guided EVs' mean travel time);

@@ -16,7 +16,9 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Protocol, TypeVar
+from typing import Any, ClassVar, Protocol, Self, TypeVar
+
+import numpy as np
 
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRow
@@ -34,7 +36,7 @@ RESUME_FREE_KEYS = frozenset({"resume", "progress"})
 
 class SavedState(Protocol):
     """A trainer's position as saved in its checkpoints (:class:`TrainState`, and the fleet's
-    :class:`~evcd.loops.fleet_train.FleetTrainState`)."""
+    :class:`~evcd.loops.fleet.FleetTrainState`)."""
 
     FORMAT: ClassVar[str]
     episodes_done: int
@@ -43,12 +45,14 @@ class SavedState(Protocol):
     def to_dict(self) -> dict[str, Any]: ...
 
 
-S = TypeVar("S")
+S = TypeVar("S", bound="TrainState")
 
 
 @dataclass
 class TrainState:
-    """Where training stands (saved in every checkpoint)."""
+    """Where training stands (saved in every checkpoint). The single target's rows are
+    :class:`EpisodeRow`\\ s; the fleet's state (:class:`~evcd.loops.fleet.FleetTrainState`) keeps its own
+    form of row and a checkpoint format of its own."""
 
     FORMAT: ClassVar[str] = CHECKPOINT_FORMAT
     episodes_done: int = 0
@@ -57,7 +61,7 @@ class TrainState:
     prepare_s: float = 0.0  # day builds of the training runner
     sessions: int = 0  # how many times training was started or resumed
     validation_s: float = 0.0  # wall time of the periodic validations (not in wall_s)
-    rows: list[EpisodeRow] = dataclasses.field(default_factory=list)
+    rows: list[Any] = dataclasses.field(default_factory=list)
     validation: ValidationRecord = dataclasses.field(default_factory=ValidationRecord)
 
     def record(self, row: EpisodeRow) -> None:
@@ -68,25 +72,49 @@ class TrainState:
         """The travel times of the training episodes that ended charging."""
         return [r.travel_time for r in self.rows if not r.truncated]
 
+    def row_dicts(self) -> list[dict[str, Any]]:
+        """The training rows as plain values (``train_episodes.csv``, the checkpoint)."""
+        return [r.row() for r in self.rows]
+
+    def curve_rows(self) -> list[Any]:
+        """The training rows as the learning curve reads them (``travel_time``, ``truncated``,
+        ``switches``)."""
+        return list(self.rows)
+
+    def summary(self) -> dict[str, Any]:
+        """What ``results.json`` reports of the training episodes (beside :func:`training_counters`)."""
+        charged = self.charged_travel()
+        return {
+            "truncated": sum(r.truncated for r in self.rows),
+            "mean_travel_time": float(np.mean(charged)) if charged else math.nan,
+            "mean_switches": float(np.mean([r.switches for r in self.rows])) if self.rows else math.nan,
+        }
+
+    @classmethod
+    def row_from_dict(cls, d: Mapping[str, Any]) -> Any:
+        """A training row back from :meth:`row_dicts`."""
+        return EpisodeRow(**d)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain values for the checkpoint."""
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        d["rows"] = [dataclasses.asdict(r) for r in self.rows]
+        d["rows"] = self.row_dicts()
         d["validation"] = self.validation.to_dict()
         return d
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> TrainState:
+    def from_dict(cls, d: Mapping[str, Any]) -> Self:
         """The inverse of :meth:`to_dict`."""
         values = dict(d)
-        values["rows"] = [EpisodeRow(**r) for r in values["rows"]]
+        values["rows"] = [cls.row_from_dict(r) for r in values["rows"]]
         values["validation"] = ValidationRecord.from_dict(values.get("validation"))
         return cls(**values)
 
 
 def training_counters(stats: Mapping[str, Any], state: Any, episodes: int) -> dict[str, Any]:
     """What every trainer reports of its training in ``results.json`` (``training``): ``state`` (a
-    :class:`TrainState` or the fleet's) and the agent's :meth:`~evcd.agents.Agent.stats`."""
+    :class:`TrainState` or the fleet's) and the agent's :meth:`~evcd.agents.Agent.stats` (empty for
+    the hindsight bound)."""
     return {
         "episodes": episodes,
         "episodes_done": state.episodes_done,
@@ -130,7 +158,7 @@ def start_run(
         state = restore_training(run_dir, agent, config, state_cls)
     if on_start is not None:
         on_start()
-    tlog = TrainLog(run_dir / TENSORBOARD, purge_step=state.transitions if resume else None)  # type: ignore[attr-defined]
+    tlog = TrainLog(run_dir / TENSORBOARD, purge_step=state.transitions if resume else None)
     if not resume:
         tlog.config(config or {}, repr(agent))
     return state, tlog
@@ -198,7 +226,7 @@ def restore_training(
         ValueError: ``config`` differs from the checkpoint's run (the message names each difference).
     """
     payload = load_checkpoint(run_dir / CHECKPOINTS)
-    expected = state_cls.FORMAT  # type: ignore[attr-defined]
+    expected = state_cls.FORMAT
     if payload.get("format") != expected:
         raise CheckpointError(f"{run_dir / CHECKPOINTS}: not a checkpoint of this trainer (format "
                               f"{payload.get('format')!r}, expected {expected!r})")  # fmt: skip
@@ -211,6 +239,6 @@ def restore_training(
                 "must continue the same experiment): " + "; ".join(diff)
             )
     agent.load_state_dict(payload["agent"])
-    state = state_cls.from_dict(payload["trainer"])  # type: ignore[attr-defined]
+    state = state_cls.from_dict(payload["trainer"])
     log.info("resuming after %d training episodes (%d transitions)", state.episodes_done, state.transitions)
     return state

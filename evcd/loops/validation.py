@@ -19,7 +19,7 @@ import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +27,9 @@ from evcd.agents.base import Agent
 from evcd.env.runners import EpisodeRunner, EpisodeSpec
 from evcd.loops.seeds import VALIDATION_STREAM, episode_specs
 from evcd.utils.validation import check_int
+
+if TYPE_CHECKING:
+    from evcd.loops.tasks import Task
 
 log = logging.getLogger(__name__)
 
@@ -151,8 +154,9 @@ class Validator:
         settings: how often and how many episodes.
         seed: the run seed.
         rules: the rules validated once on the same episodes, by name.
-        specs: the validation episodes (default: the first ``settings.episodes`` of the validation
-            stream of ``seed``; the fleet's take its days in turn, :func:`evcd.loops.fleet.fleet_spec`).
+        task: the episodes' task (:mod:`evcd.loops.tasks`): the validation episodes are its first
+            ``settings.episodes`` of the validation stream of ``seed`` (the fleet's take the days in
+            turn); ``None``: the single target's.
 
     A validation value is a row's ``travel_time`` (NaN where it is ``truncated``): the target's travel
     time, or a fleet episode's guided EVs' mean.
@@ -164,13 +168,19 @@ class Validator:
         settings: ValidationSettings,
         seed: int,
         rules: Mapping[str, Agent],
-        specs: Sequence[EpisodeSpec] | None = None,
+        task: Task | None = None,
     ) -> None:
         self.runners = runners
         self.settings = settings
-        self.specs = list(specs) if specs is not None else episode_specs(seed, range(settings.episodes),
-                                                                         VALIDATION_STREAM)  # fmt: skip
+        self.seed = seed
+        self.task = task
         self.rules = dict(rules)
+
+    def specs(self, runner: EpisodeRunner) -> list[EpisodeSpec]:
+        """The validation episodes (the same at every validation)."""
+        if self.task is None:
+            return episode_specs(self.seed, range(self.settings.episodes), VALIDATION_STREAM)
+        return self.task.specs(self.seed, self.settings.episodes, runner, VALIDATION_STREAM)
 
     def due(self, episodes_done: int, total: int) -> bool:
         """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""
@@ -179,12 +189,13 @@ class Validator:
     def validate(self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord) -> None:
         """Play the validation episodes with ``agent`` (and, the first time, the rules); add a point."""
         runner = self.runners("validation")
+        specs = self.specs(runner)
         try:
             runner.prepare()
             for name, rule in self.rules.items():
                 if name not in record.rules:
-                    record.rules[name] = _travel_times(runner.run(self.specs, rule))
-            rows = runner.run(self.specs, agent)
+                    record.rules[name] = _travel_times(runner.run(specs, rule))
+            rows = runner.run(specs, agent)
         finally:
             runner.close()
         point = ValidationPoint(episodes_done, transitions, _travel_times(rows))

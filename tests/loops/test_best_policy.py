@@ -15,13 +15,12 @@ import torch
 
 from evcd.loops.best_policy import BEST_DIR, keep_if_best, load_best, policy_to_evaluate
 from evcd.loops.evaluate import evaluate
-from evcd.loops.fleet_train import train_and_evaluate_fleet
 from evcd.loops.run_files import CHECKPOINTS, RESULTS_JSON
 from evcd.loops.train import train_and_evaluate
 from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint
 from tests.loops.test_fleet_loop import TWO_EVS
-from tests.loops.test_fleet_train import _agent, _rules, _same, _weights
+from tests.loops.test_fleet_train import Fleet, _agent, _rules, _same, _weights
 from tests.loops.test_fleet_train import _settings as fleet_settings
 from tests.loops.test_train import (
     BASELINES,
@@ -135,12 +134,12 @@ def test_a_run_with_select_best_evaluates_its_best_validated_policy(selected, tr
 
 def test_a_fleet_run_with_select_best_evaluates_the_kept_policy(make_small_fleet, tmp_path, one_torch_thread):
     env = make_small_fleet(TWO_EVS, max_travel_time=900.0)
-    fleet = {"train": env, "eval": env, "validation": env}
+    fleet = Fleet(train=env, eval=env, validation=env)
     base = fleet_settings(every=2)
     select = dataclasses.replace(base, validation=ValidationSettings(2, 1, select_best=True))
     agent, plain = _agent(env), _agent(env)
-    train_and_evaluate_fleet(agent, fleet, select, tmp_path / "a", validation_rules=_rules(env, "greedy"))
-    train_and_evaluate_fleet(plain, fleet, base, tmp_path / "b", validation_rules=_rules(env, "greedy"))
+    train_and_evaluate(agent, fleet, select, tmp_path / "a", validation_rules=_rules(env, "greedy"))
+    train_and_evaluate(plain, fleet, base, tmp_path / "b", validation_rules=_rules(env, "greedy"))
     data = json.loads((tmp_path / "a" / RESULTS_JSON).read_text())
     assert data["training"]["evaluated_after_episodes"] == data["validation"]["best_episodes_done"]
     kept = load_checkpoint(tmp_path / "a" / BEST_DIR)

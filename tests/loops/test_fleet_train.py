@@ -1,6 +1,6 @@
-"""train_and_evaluate_fleet on a hand-built fleet (real SUMO, real torch): its files, the paired
-evaluation, the validation that does not touch the weights, and an interrupted run that resumes to
-the weights of an uninterrupted one."""
+"""The one trainer (train_and_evaluate) on a hand-built fleet's runners (real SUMO, real torch): its
+files, the paired evaluation, the validation that does not touch the weights, and an interrupted run
+that resumes to the weights of an uninterrupted one."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from evcd.agents import make_agent_for_env
 from evcd.agents.dqn_config import DQNConfig
-from evcd.loops.fleet_train import FleetTrainSettings, FleetTrainState, train_and_evaluate_fleet
+from evcd.env.runners import FleetRunner
+from evcd.loops.fleet import FleetTrainState
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint
@@ -36,10 +37,17 @@ CONFIG = DQNConfig(
 )
 
 
+class Fleet(dict):
+    """Each phase's fleet env; called with a phase, its runner (what ``train_and_evaluate`` takes)."""
+
+    def __call__(self, phase: str) -> FleetRunner:
+        return FleetRunner(self[phase])
+
+
 @pytest.fixture
-def fleet(make_small_fleet) -> Any:
+def fleet(make_small_fleet) -> Fleet:
     env = make_small_fleet(TWO_EVS, max_travel_time=900.0)
-    return {"train": env, "eval": env, "validation": env}
+    return Fleet(train=env, eval=env, validation=env)
 
 
 def _agent(env: Any, name: str = "dueling_ddqn") -> Any:
@@ -50,8 +58,8 @@ def _rules(env: Any, *names: str) -> dict[str, Any]:
     return {n: make_agent_for_env(n, env, np.random.default_rng(1)) for n in names}
 
 
-def _settings(every: int = 0, episodes: int = 6) -> FleetTrainSettings:
-    return FleetTrainSettings(
+def _settings(every: int = 0, episodes: int = 6) -> TrainSettings:
+    return TrainSettings(
         episodes=episodes,
         eval_episodes=2,
         seed=3,
@@ -81,7 +89,7 @@ def test_a_fleet_run_writes_its_files_and_pairs_every_rule_on_the_same_episodes(
     env = fleet["train"]
     agent = _agent(env)
     run = tmp_path / "run"
-    result = train_and_evaluate_fleet(
+    result = train_and_evaluate(
         agent,
         fleet,
         _settings(every=2),
@@ -151,18 +159,18 @@ def test_a_fleet_run_writes_its_files_and_pairs_every_rule_on_the_same_episodes(
     assert "charts/herding" not in tags
     # a finished run is never entered again
     with pytest.raises(FileExistsError, match="already holds"):
-        train_and_evaluate_fleet(_agent(env), fleet, _settings(), run)
+        train_and_evaluate(_agent(env), fleet, _settings(), run)
     with pytest.raises(FileExistsError, match="complete"):
-        train_and_evaluate_fleet(_agent(env), fleet, _settings(), run, resume=True)
+        train_and_evaluate(_agent(env), fleet, _settings(), run, resume=True)
 
 
 def test_the_validation_does_not_change_the_weights(fleet, tmp_path, one_torch_thread) -> None:
     env = fleet["train"]
     with_it, without = _agent(env), _agent(env)
-    train_and_evaluate_fleet(
+    train_and_evaluate(
         with_it, fleet, _settings(every=2), tmp_path / "a", validation_rules=_rules(env, "queue_aware")
     )
-    train_and_evaluate_fleet(without, fleet, _settings(every=0), tmp_path / "b")
+    train_and_evaluate(without, fleet, _settings(every=0), tmp_path / "b")
     assert _same(_weights(with_it), _weights(without))
     a = _csv(tmp_path / "a" / "train_fleet_episodes.csv")
     b = _csv(tmp_path / "b" / "train_fleet_episodes.csv")
@@ -174,7 +182,7 @@ def test_an_interrupted_fleet_run_resumes_to_the_weights_of_an_uninterrupted_one
 ) -> None:
     env = fleet["train"]
     whole = _agent(env)
-    train_and_evaluate_fleet(
+    train_and_evaluate(
         whole,
         fleet,
         _settings(every=2),
@@ -196,16 +204,16 @@ def test_an_interrupted_fleet_run_resumes_to_the_weights_of_an_uninterrupted_one
 
     cut.observe = interrupted  # type: ignore[method-assign]
     with pytest.raises(KeyboardInterrupt):
-        train_and_evaluate_fleet(
+        train_and_evaluate(
             cut, fleet, _settings(every=2), run, config={"seed": 3}, validation_rules=_rules(env, "greedy")
         )
     saved = load_checkpoint(run / "checkpoints")
     assert saved["format"] == FleetTrainState.FORMAT and saved["trainer"]["episodes_done"] == 2
     assert not (run / "results.json").exists()
     with pytest.raises(ValueError, match="seed: 3 -> 4"):
-        train_and_evaluate_fleet(_agent(env), fleet, _settings(every=2), run, resume=True, config={"seed": 4})
+        train_and_evaluate(_agent(env), fleet, _settings(every=2), run, resume=True, config={"seed": 4})
     resumed = _agent(env)
-    train_and_evaluate_fleet(
+    train_and_evaluate(
         resumed,
         fleet,
         _settings(every=2),
@@ -235,7 +243,7 @@ def test_a_single_target_checkpoint_is_not_resumed_as_a_fleet_run(
     with pytest.raises(KeyboardInterrupt):
         train_and_evaluate(agent, _interrupt_eval(single), settings, run)
     with pytest.raises(CheckpointError, match=r"expected 'evcd\.fleet_train/1'"):
-        train_and_evaluate_fleet(_agent(fleet["train"]), fleet, _settings(), run, resume=True)
+        train_and_evaluate(_agent(fleet["train"]), fleet, _settings(), run, resume=True)
 
 
 def _interrupt_eval(env: Any) -> Any:
@@ -243,8 +251,13 @@ def _interrupt_eval(env: Any) -> Any:
     from evcd.env.runners import make_runner
 
     def runners(phase: str) -> Any:
+        runner = make_runner(env, "single", 1)
         if phase == "eval":
-            raise KeyboardInterrupt
-        return make_runner(env, "single", 1)
+            runner.prepare = _interrupt  # type: ignore[method-assign]
+        return runner
 
     return runners
+
+
+def _interrupt() -> None:
+    raise KeyboardInterrupt

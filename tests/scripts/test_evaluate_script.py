@@ -203,7 +203,7 @@ def test_evaluate_a_fleet_end_to_end(small, tmp_path):
     [
         (["fleet.guided_share=0"], "guided_share=0"),
         (["fleet.guided_share=1.5"], "guided_share=1.5"),
-        (["agent=hindsight"], "agent 'hindsight' is not a fleet dispatcher"),
+        (["agent=hindsight"], "agent 'hindsight' is not an agent of task=fleet"),
         (["agent=dueling_ddqn"], "agent 'dueling_ddqn' learns: give the trained policy"),
         (["agent=dqn", "agent.checkpoint=nowhere"], "nowhere"),
         (["env.protocol=paper"], "env.protocol=paper is for the single target"),

@@ -174,7 +174,7 @@ def test_each_seed_plays_its_own_evaluation_days_in_turn(small, tmp_path):
     [
         (["experiment=peak", "task=fleet"], "task=fleet with experiment regime 'peak'"),
         (["task=single"], "regime 'fleet' is the fleet's: it needs task=fleet"),
-        (["agent=hindsight"], "agent 'hindsight' is not a fleet dispatcher"),
+        (["agent=hindsight"], "agent 'hindsight' is not an agent of task=fleet"),
         (["eval.baselines=[dqn]"], "eval.baselines: 'dqn' is not a rule"),
         (["train.validation.rules=[dueling_ddqn]"], "train.validation.rules: 'dueling_ddqn' is not a rule"),
         (["fleet.guided_share=0"], "guided_share=0"),

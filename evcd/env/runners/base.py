@@ -23,11 +23,12 @@ decide for several episodes at once.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, Self
+from typing import Any, ClassVar, Protocol, Self
 
 import numpy as np
 
@@ -118,6 +119,10 @@ class EpisodeRow:
         """Decisions (transitions) in the episode."""
         return len(self.choices.split("-")) if self.choices else 0
 
+    def row(self) -> dict[str, Any]:
+        """The row's fields as plain values (a line of ``episodes.csv``, an entry of ``results.json``)."""
+        return dataclasses.asdict(self)
+
     def charts(self) -> dict[str, float]:
         """What a training curve shows of the episode (TensorBoard ``charts/<key>``)."""
         return {"travel_time": self.travel_time, "episodic_return": self.episode_return,
@@ -130,6 +135,11 @@ EpisodeCallback = Callable[[EpisodeRow], None]
 
 class EpisodeRunner(ABC):
     """Plays episodes given by specs (see the module docstring). Close it (or use ``with``)."""
+
+    #: The task its episodes belong to: ``"single"`` (rows are :class:`EpisodeRow`) or ``"fleet"``
+    #: (:class:`~evcd.env.runners.fleet.FleetEpisode`); the loops summarise and write rows by it
+    #: (:mod:`evcd.loops.tasks`).
+    task: ClassVar[str] = "single"
 
     @property
     @abstractmethod

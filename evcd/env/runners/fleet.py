@@ -89,6 +89,8 @@ class FleetRunner(EpisodeRunner):
         env: the fleet; the runner closes it in :meth:`close`.
     """
 
+    task = "fleet"
+
     def __init__(self, env: FleetEnv) -> None:
         self.env = env
 
