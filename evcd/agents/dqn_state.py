@@ -9,12 +9,11 @@ what it holds without building anything.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
+from evcd.utils.checkpoint import CheckpointError, to_numpy
 
 STATE_FORMAT = "evcd.agents.dqn/2"
 
@@ -54,19 +53,6 @@ def check_policy_state(
             raise CheckpointError(f"the checkpoint's agent has {key}={saved[key]!r}; this one has "
                                   f"{key}={value!r} (use the same agent settings)")  # fmt: skip
     return scale
-
-
-def checkpoint_agent_config(path: str | Path) -> dict[str, Any]:
-    """:func:`policy_settings` of the agent saved in a checkpoint (a file or a run directory).
-
-    Raises:
-        CheckpointError: the file is not a DQN checkpoint (or is damaged).
-    """
-    state = load_checkpoint(path)
-    try:
-        return policy_settings(state.get("agent", state))
-    except CheckpointError as exc:
-        raise CheckpointError(f"checkpoint {str(path)!r} does not hold a DQN agent") from exc
 
 
 def policy_settings(agent: Any) -> dict[str, Any]:

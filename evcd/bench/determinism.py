@@ -4,8 +4,8 @@
 process with its own heap layout (another working directory and hash seed; the first may build the
 days, the second loads them), then compares the two run directories here: every episode row of
 every episode file (the wall times aside) and a SHA-256 of the final agent state in the checkpoint
-(networks, optimiser, replay buffer, generators), with the one of the policy (the online network)
-beside it.
+(networks, optimiser, replay buffer, generators), with the one of the policy the run evaluated (its
+:meth:`~evcd.agents.Agent.policy_state_dict`, any learner's, recorded in ``results.json``) beside it.
 
     report = compare_runs(Path("outputs/a"), Path("outputs/b"))
     report["identical"], report["first_difference"]
@@ -14,16 +14,12 @@ beside it.
 from __future__ import annotations
 
 import csv
-import hashlib
 import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import torch
-
-from evcd.utils.checkpoint import load_checkpoint
+from evcd.utils.checkpoint import load_checkpoint, state_sha256
 
 #: ``python -c`` code that runs ``script`` after an unrelated allocation pattern, so that the objects the
 #: run allocates (SUMO's included) lie elsewhere in the heap than in a plain start.
@@ -45,48 +41,19 @@ def read_rows(path: Path) -> list[dict[str, str]]:
         return [{k: v for k, v in row.items() if k not in WALL_COLUMNS} for row in csv.DictReader(f)]
 
 
-def _update(h: Any, obj: Any) -> None:
-    """Feed ``obj`` (nested dicts, lists, tensors, arrays, numbers, strings) into the hash ``h``."""
-    if isinstance(obj, Mapping):
-        for key in sorted(obj, key=str):
-            h.update(f"<{key}>".encode())
-            _update(h, obj[key])
-    elif isinstance(obj, list | tuple):
-        h.update(f"[{len(obj)}]".encode())
-        for item in obj:
-            _update(h, item)
-    elif isinstance(obj, torch.Tensor):
-        array = obj.detach().cpu().contiguous().numpy()
-        h.update(f"{array.dtype}{array.shape}".encode())
-        h.update(array.tobytes())
-    elif isinstance(obj, np.ndarray):
-        h.update(f"{obj.dtype}{obj.shape}".encode())
-        h.update(np.ascontiguousarray(obj).tobytes())
-    else:
-        h.update(repr(obj).encode())
-
-
-def state_sha256(state: Any) -> str:
-    """Hex SHA-256 of a (nested) state: the same values in the same structure give the same digest."""
-    h = hashlib.sha256()
-    _update(h, state)
-    return h.hexdigest()
-
-
 def run_digest(run_dir: Path) -> dict[str, Any]:
-    """A run's episode rows per file, its transition count and the digests of its final agent state
-    (``None`` for a rule, which has no checkpoint)."""
+    """A run's episode rows per file, its transition count, the digest of its final agent state
+    (``None`` for a rule, which has no checkpoint) and the one of the policy it evaluated (any
+    learner's: ``results.json``'s ``training.policy_sha256``)."""
     run_dir = Path(run_dir)
     files = {p.name: read_rows(p) for p in sorted(run_dir.glob("*episodes.csv"))}
-    agent = policy = None
+    agent = None
     if (run_dir / CHECKPOINTS).is_dir():
-        state = load_checkpoint(run_dir / CHECKPOINTS)["agent"]
-        agent = state_sha256(state)
-        policy = state_sha256(state["online"]) if isinstance(state, Mapping) and "online" in state else None
+        agent = state_sha256(load_checkpoint(run_dir / CHECKPOINTS)["agent"])
     results = run_dir / "results.json"
     training = json.loads(results.read_text()).get("training", {}) if results.is_file() else {}
     return {"files": files, "transitions": training.get("transitions"), "agent_sha256": agent,
-            "policy_sha256": policy}  # fmt: skip
+            "policy_sha256": training.get("policy_sha256")}  # fmt: skip
 
 
 def first_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> str | None:

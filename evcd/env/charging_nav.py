@@ -36,14 +36,12 @@ from evcd.env.episode_rules import (
     slot_end_reason,
     visits_of,
 )
-from evcd.env.observation import Observation, RouteObserver, observation_bounds
-from evcd.env.reward import Slot, reward_fn
-from evcd.env.simulation import EpisodeSimulation
+from evcd.env.observation import Observation, observation_bounds
+from evcd.env.reward import Slot
 from evcd.env.target import TARGET_ID, OriginSampler, Target, TargetPlan, draw_plan
+from evcd.env.world import InWorld, World
 from evcd.scenario.demand import DAY, DemandConfig
-from evcd.scenario.routing import RoadGraph
 from evcd.scenario.scenario import JURONG_WEST
-from evcd.scenario.stations_file import Station
 from evcd.sim.driver import SUMO_ERRORS
 
 log = logging.getLogger(__name__)
@@ -62,7 +60,7 @@ class _Episode:
     done: bool = False
 
 
-class ChargingNavEnv(gymnasium.Env):
+class ChargingNavEnv(InWorld, gymnasium.Env):
     """Navigate one EV to one of the scenario's charging stations (Gymnasium environment).
 
     Args:
@@ -130,40 +128,22 @@ class ChargingNavEnv(gymnasium.Env):
         max_insert_delay: float = 600.0,
         gui: bool = False,
     ) -> None:
-        self.config = EnvConfig(
+        self.world = World(EnvConfig(
             scenario=scenario, evs=evs, decision_interval=decision_interval,
             departure_window=departure_window, max_travel_time=max_travel_time, reward=reward,
             normalize_obs=normalize_obs, protocol=protocol, charging_points=charging_points,
             demand=demand, demand_seeds=demand_seeds, route_file=route_file, cache_dir=cache_dir,
             snapshot_every=snapshot_every, step_length=step_length, time_to_teleport=time_to_teleport,
             stuck_limit=stuck_limit, day_end=day_end, max_insert_delay=max_insert_delay, gui=gui,
-        )  # fmt: skip
-        cfg = self.config
-        self.scenario, self.days = cfg.load()
-        self.stations: tuple[Station, ...] = self.scenario.stations
+        ))  # fmt: skip
         m = len(self.stations)
         self.action_space = gymnasium.spaces.Discrete(m)
-        low, high = observation_bounds(self.stations, cfg.normalize_obs)
+        low, high = observation_bounds(self.stations, self.config.normalize_obs)
         self.observation_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
-        self._reward = reward_fn(cfg.reward)
-        self.simulation = EpisodeSimulation(
-            self.scenario, self.days, cfg.protocol, cfg.departure_window, cfg.snapshot_every,
-            cfg.cache_dir, cfg.day_end, gui=cfg.gui,
-        )  # fmt: skip
         self._episode: _Episode | None = None
         self._episodes = 0
 
     # ------------------------------------------------------------------ lazily built helpers
-    @cached_property
-    def graph(self) -> RoadGraph:
-        """The network's drivable edges."""
-        return RoadGraph.from_net(self.scenario.net)
-
-    @cached_property
-    def observer(self) -> RouteObserver:
-        """Computes the observations."""
-        return RouteObserver(self.stations, self.graph, normalize=self.config.normalize_obs)
-
     @cached_property
     def origins(self) -> OriginSampler:
         """Where targets may depart."""
@@ -176,8 +156,7 @@ class ChargingNavEnv(gymnasium.Env):
 
     def prepare(self) -> None:
         """Build (or verify) every background day's snapshots now instead of at first use."""
-        for day in range(len(self.days)):
-            self.simulation.prepare(day)
+        self.world.prepare()
 
     def draw_episode(
         self, rng: np.random.Generator, options: Mapping[str, Any] | None = None
@@ -259,7 +238,7 @@ class ChargingNavEnv(gymnasium.Env):
             ep.obs = self._observe(ep.road, ep.pos)
         done = reason is not None
         slot = Slot(now - t0, now - departure, started, done and not started, travel)
-        reward = float(self._reward(slot))
+        reward = float(self.world.reward(slot))
         info: dict[str, Any] = {"time": now, "station": ep.target.station}
         if done:
             ep.done = True

@@ -60,6 +60,7 @@ from evcd.loops.train_log import TrainLog
 from evcd.loops.train_state import TrainState, save_training, start_run, training_counters
 from evcd.loops.validation import ValidationSettings, Validator
 from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
+from evcd.utils.checkpoint import state_sha256
 from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
@@ -243,9 +244,11 @@ def train_and_evaluate(
         evaluation, bases = _evaluate(agent, runner, settings, baselines or {})
         paired = {name: task.paired(evaluation.rows, base.rows, settings.seed, settings.resamples)
                   for name, base in bases.items()}  # fmt: skip
+        learner = agent if isinstance(agent, Agent) and agent.learns else None
         stats = agent.stats() if isinstance(agent, Agent) else {}
+        policy = state_sha256(learner.policy_state_dict()) if learner is not None else None
         training = {**training_counters(stats, state, episodes), **state.summary(),
-                    "evaluated_after_episodes": selected}  # fmt: skip
+                    "evaluated_after_episodes": selected, "policy_sha256": policy}  # fmt: skip
         tlog.scalars(task.score(evaluation.summary), {n: task.score(b.summary) for n, b in bases.items()},
                      {n: task.score_pair(p) for n, p in paired.items()}, state.transitions)  # fmt: skip
     finally:

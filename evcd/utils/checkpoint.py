@@ -156,3 +156,31 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     if not isinstance(state, dict):
         raise CheckpointError(f"checkpoint {str(target)!r} does not hold a dict (got {type(state).__name__})")
     return state
+
+
+def _update(h: Any, obj: Any) -> None:
+    """Feed ``obj`` (nested dicts, lists, tensors, arrays, numbers, strings) into the hash ``h``."""
+    if isinstance(obj, Mapping):
+        for key in sorted(obj, key=str):
+            h.update(f"<{key}>".encode())
+            _update(h, obj[key])
+    elif isinstance(obj, list | tuple):
+        h.update(f"[{len(obj)}]".encode())
+        for item in obj:
+            _update(h, item)
+    elif isinstance(obj, torch.Tensor):
+        array = obj.detach().cpu().contiguous().numpy()
+        h.update(f"{array.dtype}{array.shape}".encode())
+        h.update(array.tobytes())
+    elif isinstance(obj, np.ndarray):
+        h.update(f"{obj.dtype}{obj.shape}".encode())
+        h.update(np.ascontiguousarray(obj).tobytes())
+    else:
+        h.update(repr(obj).encode())
+
+
+def state_sha256(state: Any) -> str:
+    """Hex SHA-256 of a (nested) state: the same values in the same structure give the same digest."""
+    h = hashlib.sha256()
+    _update(h, state)
+    return h.hexdigest()

@@ -1,12 +1,17 @@
-"""Equality of agent states, for the learners' checkpoint tests (shared by test_dqn and test_ppo)."""
+"""Equality of agent states, and the options of a saved DQN policy, for the learners' checkpoint tests
+(shared by test_dqn, test_in_turn and test_ppo)."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+
+from evcd.agents.dqn import DQNAgent
+from evcd.agents.saved_policy import saved_policy
 
 
 def np_state_equal(a: Any, b: Any) -> bool:
@@ -27,3 +32,10 @@ def state_equal(a: Any, b: Any) -> bool:
     if isinstance(a, float) and math.isnan(a):
         return isinstance(b, float) and math.isnan(b)
     return a == b
+
+
+def saved_options(path: str | Path) -> dict[str, Any]:
+    """The options a DQN policy saved at ``path`` is rebuilt with, read as ``scripts/evaluate.py``
+    reads them (:func:`~evcd.agents.saved_policy.saved_policy`, then
+    :meth:`~evcd.agents.dqn.DQNAgent.checkpoint_options`)."""
+    return DQNAgent.checkpoint_options(saved_policy(path))

@@ -19,13 +19,13 @@ from evcd.agents import make_agent, make_agent_for_env
 from evcd.agents.base import Transition
 from evcd.agents.dqn import DQNAgent, DQNEpisode
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
-from evcd.agents.dqn_state import STATE_FORMAT, checkpoint_agent_config
+from evcd.agents.dqn_state import STATE_FORMAT
 from evcd.agents.networks import DuelingQNetwork, QNetwork
 from evcd.env.observation import unit_divisors
 from evcd.env.runners import SingleEnvRunner
 from evcd.loops.seeds import TRAIN_STREAM, episode_specs
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from tests.agents.states import np_state_equal, state_equal
+from tests.agents.states import np_state_equal, saved_options, state_equal
 from tests.agents.toy_env import ToyDispatchEnv
 
 M = 3  # stations
@@ -1086,7 +1086,7 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
         np.testing.assert_array_equal(_decide(policy, obs), _decide(trained, obs))
     built = make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **RESUME)
     assert _equal(_params(built.online), _params(trained.online))
-    config = checkpoint_agent_config(run_dir)
+    config = saved_options(run_dir)
     dueling = name == "dueling_ddqn"
     assert config == {
         "hidden": (16, 16),
@@ -1097,7 +1097,7 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
     }
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")
-    assert checkpoint_agent_config(tmp_path / "bare") == config
+    assert saved_options(tmp_path / "bare") == config
     with pytest.raises(CheckpointError, match="hidden"):
         make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **{**RESUME, "hidden": (8,)})
 
@@ -1106,7 +1106,7 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
 def test_a_station_network_checkpoint_rebuilds_its_network(tmp_path, name):
     trained = make_agent(name, M, np.random.default_rng(3), **{**RESUME, "network": "station"})
     save_checkpoint(tmp_path, trained.state_dict(), "agent")
-    config = checkpoint_agent_config(tmp_path)
+    config = saved_options(tmp_path)
     assert config["network"] == "station"
     rebuilt = make_agent(name, M, np.random.default_rng(4), checkpoint=tmp_path, **{**RESUME, **config})
     obs = _obs(np.random.default_rng(8), 40)
@@ -1117,7 +1117,7 @@ def test_a_checkpoint_from_before_the_network_option_holds_the_mlp(tmp_path):
     state = _agent(**RESUME).state_dict()
     del state["config"]["network"]
     save_checkpoint(tmp_path, state, "agent")
-    assert checkpoint_agent_config(tmp_path)["network"] == "mlp"
+    assert saved_options(tmp_path)["network"] == "mlp"
     _agent(seed=2, **RESUME).load_state_dict(state)
     with pytest.raises(CheckpointError, match="network='mlp'"):
         _agent(seed=2, **{**RESUME, "network": "station"}).load_state_dict(state)
@@ -1126,14 +1126,14 @@ def test_a_checkpoint_from_before_the_network_option_holds_the_mlp(tmp_path):
 def test_a_non_dqn_checkpoint_is_refused(tmp_path):
     save_checkpoint(tmp_path, {"format": "evcd.train/1", "agent": {"format": "greedy"}}, "ckpt_1")
     with pytest.raises(CheckpointError, match="DQN"):
-        checkpoint_agent_config(tmp_path)
+        saved_options(tmp_path)
     with pytest.raises(CheckpointError, match="DQN"):
         _agent().load(tmp_path)
     save_checkpoint(tmp_path / "other", {"weights": torch.ones(3)}, "x")
     with pytest.raises(CheckpointError, match="DQN"):
-        checkpoint_agent_config(tmp_path / "other")
+        saved_options(tmp_path / "other")
     with pytest.raises(CheckpointError):
-        checkpoint_agent_config(tmp_path / "missing")
+        saved_options(tmp_path / "missing")
 
 
 # -- determinism and random state -----------------------------------------------------------------------

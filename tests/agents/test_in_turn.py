@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from evcd.agents import make_agent
-from evcd.agents.dqn_state import checkpoint_agent_config
 from evcd.agents.in_turn import counted_at, decide_in_turn
 from evcd.env.transition import Transition
 from evcd.utils.checkpoint import save_checkpoint
+from tests.agents.states import saved_options
 
 M = 2
 SMALL = {"hidden": (16, 16), "batch_size": 8, "buffer_size": 64, "learning_starts": 1000}
@@ -169,7 +169,7 @@ def test_in_turn_is_the_fleets_and_a_checkpoint_keeps_it(tmp_path) -> None:
     with pytest.raises(ValueError, match="in_turn"):
         _agent(in_turn="yes")
     save_checkpoint(tmp_path, _agent(in_turn=True).state_dict(), "agent")
-    config = checkpoint_agent_config(tmp_path)
+    config = saved_options(tmp_path)
     assert config["in_turn"] is True
     rebuilt = make_agent(
         "dqn", M, np.random.default_rng(5), obs_blocks=4, checkpoint=tmp_path, **{**SMALL, **config}

@@ -63,6 +63,16 @@ def test_the_first_different_episode_is_named(tmp_path):
     assert "different episode files" in first_difference(run_digest(a), run_digest(tmp_path / "d"))
 
 
+def test_the_evaluated_policy_of_any_learner_is_compared_by_its_recorded_digest(tmp_path):
+    a = write_rows(tmp_path / "a", ROWS)
+    b = write_rows(tmp_path / "b", ROWS)
+    for run, digest in ((a, "aa11"), (b, "bb22")):
+        training = {"transitions": 40, "policy_sha256": digest}
+        (run / "results.json").write_text(json.dumps({"agent": "ppo", "training": training}))
+    assert run_digest(a)["policy_sha256"] == "aa11"
+    assert first_difference(run_digest(a), run_digest(b)) == "policy_sha256: aa11 vs bb22"
+
+
 def test_the_suite_trains_twice_in_fresh_processes_and_finds_them_identical(script_overrides, tmp_path):
     out = tmp_path / "determinism.json"
     tiny = [*script_overrides, "agent=dqn", "learner.hidden=[16,16]", "learner.learning_starts=4",

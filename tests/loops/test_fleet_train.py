@@ -21,7 +21,7 @@ from evcd.env.runners import FleetRunner
 from evcd.loops.fleet import FleetTrainState
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
-from evcd.utils.checkpoint import CheckpointError, load_checkpoint
+from evcd.utils.checkpoint import CheckpointError, load_checkpoint, state_sha256
 from tests.loops.test_fleet_loop import TWO_EVS
 
 CONFIG = DQNConfig(
@@ -115,6 +115,7 @@ def test_a_fleet_run_writes_its_files_and_pairs_every_rule_on_the_same_episodes(
     t = data["training"]
     assert t["episodes_done"] == 6 and t["transitions"] == sum(int(r["transitions"]) for r in train)
     assert t["gradient_steps"] > 0 and agent.stats()["gradient_steps"] == t["gradient_steps"]
+    assert t["policy_sha256"] == state_sha256(agent.policy_state_dict())  # the evaluated policy's
     # validation after 2, 4 and 6 episodes on the same episode, greedy once beside it
     points = data["validation"]["points"]
     assert [p["episodes_done"] for p in points] == [2, 4, 6] and list(data["validation"]["rules"]) == [

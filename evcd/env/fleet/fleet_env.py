@@ -34,6 +34,7 @@ it 0).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 from collections.abc import Callable, Mapping, Sequence
@@ -51,12 +52,10 @@ from evcd.env.fleet.events import advance, heading
 from evcd.env.fleet.guided import GuidedEV, Stage
 from evcd.env.fleet.measures import FleetMeasures, measure
 from evcd.env.fleet.trips import ChargingTrip, draw_guided, in_window, read_charging_trips
-from evcd.env.observation import MAX_VEHICLES, Observation, RouteObserver, observation_bounds, unit_divisors
-from evcd.env.reward import Slot, reward_fn
-from evcd.env.simulation import EpisodeSimulation
+from evcd.env.observation import MAX_VEHICLES, Observation, observation_bounds, unit_divisors
+from evcd.env.reward import Slot
 from evcd.env.target import Target
-from evcd.scenario.demand import DemandConfig
-from evcd.scenario.routing import RoadGraph
+from evcd.env.world import InWorld, World
 from evcd.scenario.scenario import JURONG_WEST
 from evcd.sim.charge_record import ChargeRecord
 from evcd.sim.driver import SUMO_ERRORS
@@ -66,27 +65,33 @@ log = logging.getLogger(__name__)
 
 #: The morning peak (s of day): the fleet's default departure window.
 MORNING_PEAK = (25_200.0, 36_000.0)
+#: The world's settings a fleet takes as keywords besides its own (:class:`~evcd.env.config.EnvConfig`).
+WORLD_OPTIONS = tuple(f.name for f in dataclasses.fields(EnvConfig)
+                      if f.init and f.name not in ("scenario", "departure_window", "reward"))  # fmt: skip
 _OPTIONS = {"day"}
 
 
-class FleetEnv(ParallelEnv):
+class FleetEnv(InWorld, ParallelEnv):
     """Guide a share of a background day's charging EVs at once (PettingZoo ``ParallelEnv``).
 
     Args:
         scenario: scenario folder (default the committed Jurong West one).
         guided_share: share of the window's charging EVs the centre guides, in (0, 1].
-        evs: background EVs in the day (default: :class:`~evcd.scenario.demand.DemandConfig`'s).
-        decision_interval: seconds between ticks.
-        departure_window: ``(start, end)`` s of day: the guided EVs depart in it.
-        max_travel_time: seconds after its departure at which a guided EV is truncated.
-        reward: ``"time"`` (minus hours per slot), ``"paper"`` (``7200 / T_travel`` at charge start)
-            or a callable taking a :class:`~evcd.env.reward.Slot`.
-        normalize_obs: scale ``D`` to km, ``N`` to tens, ``Z`` and ``H`` to multiples of the points.
+        departure_window: ``(start, end)`` s of day: the guided EVs depart in it (default the
+            morning peak).
+        reward: ``"time"`` (minus hours per slot; the default), ``"paper"`` (``7200 / T_travel`` at
+            charge start) or a callable taking a :class:`~evcd.env.reward.Slot`.
+        world: the rest of the world's description, the keyword arguments of
+            :class:`~evcd.env.ChargingNavEnv` with the same meaning and defaults (:data:`WORLD_OPTIONS`:
+            ``evs``, ``decision_interval`` (seconds between ticks), ``max_travel_time`` (per guided
+            EV), ``normalize_obs`` (also ``H``, in multiples of the points), ``charging_points``,
+            ``demand``, ``demand_seeds``, ``route_file``, ``cache_dir``, ``snapshot_every``,
+            ``step_length``, ``time_to_teleport``, ``stuck_limit``, ``max_insert_delay``, ``day_end``;
+            ``protocol`` only ``"fast"`` and ``gui`` only false).
 
-    The keyword-only arguments are :class:`~evcd.env.ChargingNavEnv`'s (``charging_points``,
-    ``demand``, ``demand_seeds``, ``route_file``, ``cache_dir``, ``snapshot_every``, ``step_length``,
-    ``time_to_teleport``, ``stuck_limit``, ``max_insert_delay``). Every invalid argument raises
-    ``ValueError`` naming it before SUMO starts. ``reset(seed=...)`` draws the day and the guided EVs;
+    Both environments describe their world with one :class:`~evcd.env.config.EnvConfig` and play in
+    a :class:`~evcd.env.world.World`. Every invalid argument raises ``ValueError`` naming it before
+    SUMO starts. ``reset(seed=...)`` draws the day and the guided EVs;
     ``reset(options={"day": i})`` fixes the day (an index into ``demand_seeds``). Agents are the
     guided EVs' SUMO ids. libsumo runs one simulation per process: one fleet per process.
     """
@@ -97,44 +102,28 @@ class FleetEnv(ParallelEnv):
         self,
         scenario: str | Path = JURONG_WEST,
         guided_share: float = 1.0,
-        evs: int | None = None,
-        decision_interval: float = 60.0,
-        departure_window: tuple[float, float] = MORNING_PEAK,
-        max_travel_time: float = 7200.0,
-        reward: str | Callable[[Slot], float] = "time",
-        normalize_obs: bool = False,
         *,
-        charging_points: int | None = None,
-        demand: DemandConfig | dict[str, Any] | None = None,
-        demand_seeds: Sequence[int] = (0,),
-        route_file: str | Path | None = None,
-        cache_dir: str | Path | None = None,
-        snapshot_every: float = 300.0,
-        step_length: float = 1.0,
-        time_to_teleport: float = 300.0,
-        stuck_limit: float = 600.0,
-        max_insert_delay: float = 600.0,
+        departure_window: tuple[float, float] = MORNING_PEAK,
+        reward: str | Callable[[Slot], float] = "time",
+        **world: Any,
     ) -> None:
         self.guided_share = check_real("guided_share", guided_share, low=0.0, high=1.0, low_open=True)
-        self.config = EnvConfig(
-            scenario=scenario, evs=evs, decision_interval=decision_interval,
-            departure_window=departure_window, max_travel_time=max_travel_time, reward=reward,
-            normalize_obs=normalize_obs, charging_points=charging_points, demand=demand,
-            demand_seeds=demand_seeds, route_file=route_file, cache_dir=cache_dir,
-            snapshot_every=snapshot_every, step_length=step_length, time_to_teleport=time_to_teleport,
-            stuck_limit=stuck_limit, max_insert_delay=max_insert_delay,
-        )  # fmt: skip
-        cfg = self.config
-        self.scenario, self.days = cfg.load()
-        self.stations = self.scenario.stations
-        self.simulation = EpisodeSimulation(
-            self.scenario, self.days, "fast", cfg.departure_window, cfg.snapshot_every, cfg.cache_dir
-        )
-        self._reward = reward_fn(cfg.reward)
+        unknown = sorted(set(world) - set(WORLD_OPTIONS))
+        if unknown:
+            raise ValueError(f"FleetEnv: unknown arguments {unknown}; besides scenario, guided_share, "
+                             f"departure_window and reward it takes {', '.join(WORLD_OPTIONS)}")  # fmt: skip
+        if world.get("protocol", "fast") != "fast":
+            raise ValueError(f"protocol={world['protocol']!r}: the fleet runs from the day's snapshot at the "
+                             "window's start, so it takes protocol='fast' only")  # fmt: skip
+        if world.get("gui", False):
+            raise ValueError("gui=True: the fleet runs headless (watch a single target's episodes with "
+                             "ChargingNavEnv(gui=True))")  # fmt: skip
+        config = EnvConfig(scenario=scenario, departure_window=departure_window, reward=reward, **world)
+        self.world = World(config)
         m = len(self.stations)
         self._h_units = unit_divisors([st.points for st in self.stations], blocks=4)[3 * m :]
-        _, high = observation_bounds(self.stations, cfg.normalize_obs)
-        h_high = np.full(m, MAX_VEHICLES) / (self._h_units if normalize_obs else 1.0)
+        _, high = observation_bounds(self.stations, config.normalize_obs)
+        h_high = np.full(m, MAX_VEHICLES) / (self._h_units if config.normalize_obs else 1.0)
         high = np.concatenate([high, h_high]).astype(np.float32)
         self._obs_space = gymnasium.spaces.Box(np.zeros(4 * m, dtype=np.float32), high, dtype=np.float32)
         self._act_space = gymnasium.spaces.Discrete(m)
@@ -147,16 +136,6 @@ class FleetEnv(ParallelEnv):
         self._ended = False
 
     # ------------------------------------------------------------------ the parts
-    @functools.cached_property
-    def graph(self) -> RoadGraph:
-        """The network's drivable edges."""
-        return RoadGraph.from_net(self.scenario.net)
-
-    @functools.cached_property
-    def observer(self) -> RouteObserver:
-        """Computes ``[D, N, Z]``."""
-        return RouteObserver(self.stations, self.graph, normalize=self.config.normalize_obs)
-
     @functools.cached_property
     def candidates(self) -> list[list[ChargingTrip]]:
         """Per day (index into ``demand_seeds``): its charging EVs departing in the window (the day's
@@ -190,8 +169,7 @@ class FleetEnv(ParallelEnv):
             ValueError: a day has no charging EV departing in the window (before SUMO starts).
         """
         self.check_days()
-        for day in range(len(self.days)):
-            self.simulation.prepare(day)
+        self.world.prepare()
 
     def check_days(self) -> None:
         """Raise ``ValueError`` (no SUMO needed) if a day has no charging EV departing in the window."""
@@ -295,7 +273,7 @@ class FleetEnv(ParallelEnv):
             slot = Slot(
                 end - ev.slot_start, end - ev.trip.depart, started, done and not started, ev.travel_time
             )
-            rewards[agent] = float(self._reward(slot))
+            rewards[agent] = float(self.world.reward(slot))
             terminations[agent], truncations[agent] = started, done and not started
             infos[agent] = self._info(ev)
             ev.slot_start = self._tick

@@ -179,6 +179,33 @@ class EpisodeRunner(ABC):
         self.close()
 
 
+class EnvRunner(EpisodeRunner):
+    """A runner over one environment (``self.env``): its stations are the actions, its ``prepare``
+    (day snapshots), if it has one, prepares the runner, and closing the runner closes it.
+
+    Args:
+        env: the environment (a Gymnasium env, or the fleet's PettingZoo one).
+    """
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+
+    @property
+    def n_stations(self) -> int:
+        """The environment's number of stations (actions)."""
+        return len(self.env.unwrapped.stations)
+
+    def prepare(self) -> None:
+        """The environment's ``prepare`` (its days' snapshots), if it has one."""
+        prepare = getattr(self.env.unwrapped, "prepare", None)
+        if prepare is not None:
+            prepare()
+
+    def close(self) -> None:
+        """Close the environment (idempotent)."""
+        self.env.close()
+
+
 def row_from_info(
     spec: EpisodeSpec,
     info: dict[str, Any],

@@ -52,7 +52,7 @@ from gymnasium.utils import seeding
 
 from evcd.env.charging_nav import ChargingNavEnv
 from evcd.env.reward import reward_fn
-from evcd.env.runners.base import EpisodeCallback, EpisodeRow, EpisodeRunner, EpisodeSpec, Policy
+from evcd.env.runners.base import EnvRunner, EpisodeCallback, EpisodeRow, EpisodeSpec, Policy
 from evcd.env.runners.batch import BatchSimulation
 from evcd.env.runners.live import TARGET_VTYPE, LiveTarget, TargetIds
 from evcd.env.target import Target, TargetPlan
@@ -65,7 +65,7 @@ from evcd.utils.validation import check_int
 DEFAULT_BATCH_EPISODES = 25
 
 
-class BatchedRunner(EpisodeRunner):
+class BatchedRunner(EnvRunner):
     """Plays episodes many at a time, co-simulated in their background day (module docstring).
 
     Args:
@@ -78,24 +78,11 @@ class BatchedRunner(EpisodeRunner):
         self.batch_episodes = check_int("batch_episodes", batch_episodes, minimum=1)
         if not isinstance(env.unwrapped, ChargingNavEnv):
             raise ValueError(f"the batched engine needs a ChargingNavEnv, not {type(env.unwrapped).__name__}")
-        self.env = env.unwrapped
+        super().__init__(env.unwrapped)
         self.reward = reward_fn(self.env.config.reward)
         self.ids = TargetIds()
         self.batches = 0  # simulations run (for the benchmark)
         self.sumo_errors = 0
-
-    @property
-    def n_stations(self) -> int:
-        """Number of stations (actions)."""
-        return len(self.env.stations)
-
-    def prepare(self) -> None:
-        """Build (or verify) the days' snapshots."""
-        self.env.prepare()
-
-    def close(self) -> None:
-        """Close the simulation."""
-        self.env.close()
 
     # ------------------------------------------------------------------ planning
     def plan(self, specs: Sequence[EpisodeSpec]) -> list[tuple[int, TargetPlan]]:

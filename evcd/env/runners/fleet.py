@@ -28,7 +28,7 @@ import numpy as np
 from evcd.env.episode_rules import UNOBSERVED
 from evcd.env.fleet import FleetEnv
 from evcd.env.fleet.measures import FleetMeasures
-from evcd.env.runners.base import EpisodeRunner, EpisodeSpec, Policy
+from evcd.env.runners.base import EnvRunner, EpisodeSpec, Policy
 from evcd.env.transition import Transition
 
 
@@ -81,7 +81,7 @@ class FleetEpisode:
         return {k: float(row[k]) for k in keys if math.isfinite(float(row[k]))}
 
 
-class FleetRunner(EpisodeRunner):
+class FleetRunner(EnvRunner):
     """Fleet episodes one after another in one :class:`~evcd.env.fleet.FleetEnv` (each starts a fresh
     SUMO from its window's snapshot). Rows are :class:`FleetEpisode`\\ s.
 
@@ -92,20 +92,7 @@ class FleetRunner(EpisodeRunner):
     task = "fleet"
 
     def __init__(self, env: FleetEnv) -> None:
-        self.env = env
-
-    @property
-    def n_stations(self) -> int:
-        """The fleet's number of stations (actions)."""
-        return len(self.env.stations)
-
-    def prepare(self) -> None:
-        """Check every day has EVs to guide and build its snapshots now."""
-        self.env.prepare()
-
-    def close(self) -> None:
-        """Close the fleet's simulation."""
-        self.env.close()
+        super().__init__(env)
 
     def run(  # type: ignore[override]
         self,

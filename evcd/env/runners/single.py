@@ -10,14 +10,13 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-import gymnasium
 import numpy as np
 
 from evcd.env.episode_rules import UNOBSERVED
 from evcd.env.runners.base import (
+    EnvRunner,
     EpisodeCallback,
     EpisodeRow,
-    EpisodeRunner,
     EpisodeSpec,
     Policy,
     row_from_info,
@@ -25,7 +24,7 @@ from evcd.env.runners.base import (
 from evcd.env.transition import Transition
 
 
-class SingleEnvRunner(EpisodeRunner):
+class SingleEnvRunner(EnvRunner):
     """Episodes one after another in one environment (a :class:`~evcd.env.ChargingNavEnv`, or any
     Gymnasium env with a ``Discrete`` action space whose final ``info`` has the keys of
     :class:`~evcd.env.runners.base.EpisodeRow`: ``departure``, ``travel_time``, ``queue_wait``,
@@ -35,23 +34,10 @@ class SingleEnvRunner(EpisodeRunner):
         env: the environment; the runner closes it in :meth:`close`.
     """
 
-    def __init__(self, env: gymnasium.Env) -> None:
-        self.env = env
-
     @property
     def n_stations(self) -> int:
         """The environment's number of actions."""
         return int(self.env.action_space.n)
-
-    def prepare(self) -> None:
-        """The environment's ``prepare`` (day snapshots), if it has one."""
-        prepare = getattr(self.env.unwrapped, "prepare", None)
-        if prepare is not None:
-            prepare()
-
-    def close(self) -> None:
-        """Close the environment."""
-        self.env.close()
 
     def run(
         self,

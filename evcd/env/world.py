@@ -1,0 +1,107 @@
+"""The simulated world an environment plays in: one description shared by both environments.
+
+    world = World(EnvConfig(evs=400, departure_window=(25200, 36000), reward="time"))
+    world.stations, world.days, world.simulation, world.observer     # what an episode needs
+
+A :class:`World` is built from an :class:`~evcd.env.config.EnvConfig` (the scenario, its background
+days, the departure window, the charging points, the reward, the observation units, the protocol,
+SUMO's settings; every value checked before SUMO starts) and holds what both
+:class:`~evcd.env.ChargingNavEnv` (one target) and :class:`~evcd.env.fleet.FleetEnv` (many guided
+EVs) play on: the scenario and its stations, the days, this process's episode simulation
+(:class:`~evcd.env.simulation.EpisodeSimulation`), the reward function, the road graph and the route
+observer. Both environments reach it through :class:`InWorld`, so a setting means the same in both.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+from evcd.env.config import EnvConfig
+from evcd.env.observation import RouteObserver
+from evcd.env.reward import RewardFn, reward_fn
+from evcd.env.simulation import EpisodeSimulation
+from evcd.scenario.routing import RoadGraph
+from evcd.scenario.scenario import Scenario
+from evcd.scenario.stations_file import Station
+from evcd.sim.snapshots import DaySpec
+
+
+class World:
+    """The scenario, its background days and this process's simulation of them (module docstring).
+
+    Args:
+        config: the world's settings (checked already: :class:`~evcd.env.config.EnvConfig`).
+
+    Raises:
+        ValueError: the scenario folder is missing or malformed (no SUMO yet).
+    """
+
+    def __init__(self, config: EnvConfig) -> None:
+        self.config = config
+        self.scenario, self.days = config.load()
+        self.reward: RewardFn = reward_fn(config.reward)
+        self.simulation = EpisodeSimulation(
+            self.scenario, self.days, config.protocol, config.departure_window, config.snapshot_every,
+            config.cache_dir, config.day_end, gui=config.gui,
+        )  # fmt: skip
+
+    @property
+    def stations(self) -> tuple[Station, ...]:
+        """The charging stations (the actions, in order)."""
+        return self.scenario.stations
+
+    @cached_property
+    def graph(self) -> RoadGraph:
+        """The network's drivable edges."""
+        return RoadGraph.from_net(self.scenario.net)
+
+    @cached_property
+    def observer(self) -> RouteObserver:
+        """Computes ``[D, N, Z]`` (:mod:`evcd.env.observation`) in the configured units."""
+        return RouteObserver(self.stations, self.graph, normalize=self.config.normalize_obs)
+
+    def prepare(self) -> None:
+        """Build (or verify) every background day's snapshots now instead of at first use."""
+        for day in range(len(self.days)):
+            self.simulation.prepare(day)
+
+
+class InWorld:
+    """What an environment in a :class:`World` offers of it (``self.world`` set by its constructor)."""
+
+    world: World
+
+    @property
+    def config(self) -> EnvConfig:
+        """The world's settings."""
+        return self.world.config
+
+    @property
+    def scenario(self) -> Scenario:
+        """The scenario (network, stations, vehicle types)."""
+        return self.world.scenario
+
+    @property
+    def days(self) -> list[DaySpec]:
+        """The background days (one per ``demand_seeds`` entry)."""
+        return self.world.days
+
+    @property
+    def stations(self) -> tuple[Station, ...]:
+        """The charging stations (the actions, in order)."""
+        return self.world.stations
+
+    @property
+    def simulation(self) -> EpisodeSimulation:
+        """This process's simulation of the days."""
+        return self.world.simulation
+
+    @property
+    def graph(self) -> RoadGraph:
+        """The network's drivable edges."""
+        return self.world.graph
+
+    @property
+    def observer(self) -> RouteObserver:
+        """Computes the observations' ``[D, N, Z]``."""
+        return self.world.observer
