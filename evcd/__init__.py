@@ -2,15 +2,19 @@
 
 Importing :mod:`evcd` registers the Gymnasium id ``evcd/ChargingNav-v0`` by its string entry point,
 so that importing any module of the package (say :mod:`evcd.sim.snapshots`) does not pull in the
-environment layer; ``gymnasium.make`` imports it when the environment is made.
+environment layer; ``gymnasium.make`` imports it when the environment is made. The id makes
+:func:`evcd.experiments.make_env`: an experiment's world per split
+(``gymnasium.make("evcd/ChargingNav-v0", experiment="peak", split="train")``), or a
+:class:`~evcd.env.ChargingNavEnv` of the arguments given; observations normalised unless
+``normalize_obs=False``.
 """
 
 import gymnasium
 
 __version__ = "0.1.0"
 
-#: The Gymnasium id of :class:`evcd.env.ChargingNavEnv`.
+#: The Gymnasium id of :class:`evcd.env.ChargingNavEnv` (made by :func:`evcd.experiments.make_env`).
 ENV_ID = "evcd/ChargingNav-v0"
 
 if ENV_ID not in gymnasium.registry:
-    gymnasium.register(id=ENV_ID, entry_point="evcd.env.charging_nav:ChargingNavEnv")
+    gymnasium.register(id=ENV_ID, entry_point="evcd.experiments.make:make_env")

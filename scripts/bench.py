@@ -47,7 +47,8 @@ from evcd.bench import engines as engine_bench
 from evcd.bench.equivalence import compare_protocols
 from evcd.bench.protocols import run_bench
 from evcd.bench.replay import time_replay
-from evcd.cli.params import compose_train, learner_config
+from evcd.cli.params import learner_config
+from evcd.experiments.compose import compose_experiment
 from evcd.scenario.demand import DemandConfig
 from evcd.scenario.scenario import JURONG_WEST
 from evcd.utils.atomic import atomic_write_text
@@ -109,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         from evcd.bench.fleet import fleet_learning_rate, fleet_overhead
 
         fleet_kwargs = {**env_kwargs, "guided_share": args.guided_share, "cache_dir": args.cache_dir}
-        learner = learner_config(compose_train(CONF, "experiment=peak").learner)  # the default regime's
+        learner = learner_config(compose_experiment("peak", conf_dir=CONF).learner)  # the default regime's
         try:
             report = fleet_overhead(fleet_kwargs, episodes=args.episodes)
             report["learning"] = fleet_learning_rate({**fleet_kwargs, "reward": "time"}, learner)
@@ -221,7 +222,7 @@ def run_engine_suite(args: argparse.Namespace, env_kwargs: dict, replay: dict) -
         return {"summary": out.pop("summary"), **out}
     from evcd.agents.dqn import DQNAgent  # noqa: F401  (torch imported before timing)
 
-    regime = compose_train(CONF, "experiment=peak")  # the default regime, as train.py composes it
+    regime = compose_experiment("peak", conf_dir=CONF)  # the default regime, as train.py composes it
     peak_rates = engine_bench.engine_rates({**peak, "reward": "time"}, 20, 400, 25)
     peak_100 = engine_bench.engine_rates({**peak, "reward": "time"}, 20, 400, 100)  # the faster setting
     eval_run = engine_bench.engine_rates({**peak, "reward": "time"}, 1, 100, 25)["batched"]

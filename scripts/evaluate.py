@@ -31,13 +31,14 @@ from omegaconf import DictConfig, OmegaConf
 from evcd.agents import agent_class, agent_defaults, make_agent_for_env
 from evcd.agents.saved_policy import saved_policy
 from evcd.cli.errors import stop_on_bad_setting
-from evcd.cli.params import agent_params, env_kwargs, fleet_kwargs
+from evcd.cli.params import agent_params
 from evcd.cli.run_record import write_run_record
-from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.env.runners.fleet import FleetRunner
+from evcd.experiments.schema import register_configs
+from evcd.experiments.worlds import env_kwargs, fleet_kwargs
 from evcd.loops.evaluate import evaluate
 from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher

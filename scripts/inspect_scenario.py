@@ -23,7 +23,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.cli.params import demand_config
+from evcd.experiments.worlds import demand_config
 from evcd.report.figures import plot_scenario_day
 from evcd.report.scenario import day_summary, format_table, station_distance_matrix, station_table
 from evcd.scenario.demand import DAY, generate_demand, write_demand

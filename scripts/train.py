@@ -30,15 +30,16 @@ from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class, make_agent_for_env
 from evcd.cli.errors import stop_on_bad_setting
-from evcd.cli.params import agent_params, config_days, env_kwargs, fleet_kwargs, learner_config
+from evcd.cli.params import agent_params, learner_config
 from evcd.cli.run_record import write_run_record
-from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import FleetRunner, check_engine, make_runner
+from evcd.experiments.schema import register_configs
+from evcd.experiments.worlds import split_days, split_kwargs
 from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.hindsight import dispatcher_learns, dispatcher_names, make_dispatcher
-from evcd.loops.seeds import agent_rng, baseline_rng, days_of_seed
+from evcd.loops.seeds import agent_rng, baseline_rng
 from evcd.loops.tasks import TASKS
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
@@ -68,39 +69,17 @@ def check_task(cfg: DictConfig) -> str:
     return task
 
 
-def _days(cfg: DictConfig, seed: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
-    """The training and evaluation days. With ``eval.day_per_seed`` each seed has its own held-out days
-    (:func:`~evcd.loops.seeds.days_of_seed`): one for the single target, one per evaluation episode for
-    the fleet (a fleet episode is a whole window of its day)."""
-    train_days, eval_days = config_days(cfg, "train.days"), config_days(cfg, "eval.days")
-    if bool(cfg.eval.day_per_seed):
-        count = check_int("eval.episodes", cfg.eval.episodes, minimum=1) if cfg.task == "fleet" else 1
-        eval_days = days_of_seed(eval_days, seed, count)
+def _train_days(cfg: DictConfig, seed: int) -> tuple[int, ...]:
+    """The training days, checked with the evaluation days (:func:`~evcd.experiments.worlds.split_days`:
+    with ``eval.day_per_seed`` each seed has its own held-out days)."""
+    train_days, eval_days = split_days(cfg, "train", seed), split_days(cfg, "eval", seed)
     if tuple(cfg.env.demand_seeds) != train_days:
         raise ValueError(f"env.demand_seeds={list(cfg.env.demand_seeds)}: train.py sets it from "
                          f"train.days (and eval.days); set those instead")  # fmt: skip
     if set(train_days) & set(eval_days):
         log.warning("train.days and eval.days share %s: the evaluation is not on unseen traffic",
                     sorted(set(train_days) & set(eval_days)))  # fmt: skip
-    return train_days, eval_days
-
-
-def _validation_days(
-    cfg: DictConfig, train_days: tuple[int, ...], eval_days: tuple[int, ...]
-) -> tuple[int, ...]:
-    days = config_days(cfg, "train.validation.days")
-    shared = set(days) & set(train_days + eval_days)
-    if shared:
-        raise ValueError(f"train.validation.days share {sorted(shared)} with train.days or eval.days: "
-                         "validate on tuning days")  # fmt: skip
-    return days
-
-
-def _window(cfg: DictConfig, key: str) -> dict[str, Any]:
-    """``{"departure_window": ...}`` from ``key`` (``train.departure_window`` or
-    ``train.validation.departure_window``), or nothing where it is null (``env.departure_window``)."""
-    window = OmegaConf.select(cfg, key)
-    return {"departure_window": tuple(window)} if window is not None else {}
+    return train_days
 
 
 def _settings(cfg: DictConfig, seed: int, min_episodes: int) -> dict[str, Any]:
@@ -123,7 +102,7 @@ def _settings(cfg: DictConfig, seed: int, min_episodes: int) -> dict[str, Any]:
 def build(cfg: DictConfig) -> dict[str, Any]:
     """Everything the run needs, checked before any simulation starts."""
     seed = check_int("seed", cfg.seed, minimum=0)
-    train_days, eval_days = _days(cfg, seed)
+    train_days = _train_days(cfg, seed)
     settings = TrainSettings(
         **_settings(cfg, seed, min_episodes=0),
         rotate_days=len(train_days) if bool(cfg.train.rotate_days) else 0,
@@ -137,19 +116,11 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
                          "resume=true with its hydra.run.dir")  # fmt: skip
     params.pop("checkpoint", None)
-    base = env_kwargs(cfg)
-    envs = {
-        "train": ChargingNavEnv(
-            **{**base, "demand_seeds": train_days, **_window(cfg, "train.departure_window")}
-        ),
-        "eval": ChargingNavEnv(**{**base, "demand_seeds": eval_days}),
-    }  # validates every environment value; loads the scenario; no SUMO yet
+    envs = {split: ChargingNavEnv(**split_kwargs(cfg, split, seed)) for split in ("train", "eval")}
+    # validates every environment value; loads the scenario; no SUMO yet
     rules: dict[str, Any] = {}
     if settings.validation.every and dispatcher_learns(name):
-        days = _validation_days(cfg, train_days, eval_days)
-        envs["validation"] = ChargingNavEnv(
-            **{**base, "demand_seeds": days, **_window(cfg, "train.validation.departure_window")}
-        )
+        envs["validation"] = ChargingNavEnv(**split_kwargs(cfg, "tuning", seed))
         rules = {str(r): make_dispatcher(str(check_rule(r, "train.validation.rules")), envs["validation"],
                                          baseline_rng(seed)) for r in cfg.train.validation.rules}  # fmt: skip
     agent = make_dispatcher(name, envs["train"], agent_rng(settings.seed), **params)
@@ -202,7 +173,7 @@ def _fleet_rule(name: Any, env: FleetEnv, seed: int, key: str) -> Any:
 def build_fleet(cfg: DictConfig) -> dict[str, Any]:
     """``task=fleet``: everything the fleet run needs, checked before any simulation starts."""
     seed = check_int("seed", cfg.seed, minimum=0)
-    train_days, eval_days = _days(cfg, seed)
+    _train_days(cfg, seed)
     settings = TrainSettings(**_settings(cfg, seed, min_episodes=1))
     check_int("torch_threads", cfg.torch_threads, minimum=1)
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
@@ -213,17 +184,11 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
                          "resume=true with its hydra.run.dir")  # fmt: skip
     if agent_class(name).learner_block:
         params["config"] = learner_config(cfg.learner)
-    base = fleet_kwargs(cfg)  # refuses the single target's options
-    envs = {
-        "train": FleetEnv(**{**base, "demand_seeds": train_days, **_window(cfg, "train.departure_window")}),
-        "eval": FleetEnv(**{**base, "demand_seeds": eval_days}),
-    }  # validates every value (guided_share in (0, 1]); no SUMO yet
+    # refuses the single target's options; validates every value (guided_share in (0, 1]); no SUMO yet
+    envs = {split: FleetEnv(**split_kwargs(cfg, split, seed)) for split in ("train", "eval")}
     rules: dict[str, Any] = {}
     if settings.validation.every and learns:
-        days = _validation_days(cfg, train_days, eval_days)
-        envs["validation"] = FleetEnv(
-            **{**base, "demand_seeds": days, **_window(cfg, "train.validation.departure_window")}
-        )
+        envs["validation"] = FleetEnv(**split_kwargs(cfg, "tuning", seed))
         rules = {str(r): _fleet_rule(r, envs["validation"], seed, "train.validation.rules")
                  for r in cfg.train.validation.rules}  # fmt: skip
     for env in envs.values():

@@ -25,9 +25,9 @@ import sumolib
 from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
-from evcd.cli.schema import register_configs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv, parallel_env
+from evcd.experiments.schema import register_configs
 from evcd.scenario.placement import place_stations
 from evcd.scenario.scenario import STATIONS_FILE, VTYPES_FILE
 from evcd.scenario.stations_file import Station, write_stations

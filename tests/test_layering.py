@@ -1,12 +1,13 @@
 """The house: each folder of ``evcd/`` is one layer and imports run one way, from the top down
 (shared/DESIGN.md section 5):
 
-    utils < scenario < sim < env < agents < loops < report, bench < cli (< scripts)
+    utils < scenario < sim < env < agents < loops < report, bench, experiments < cli (< scripts)
 
 A module imports ``evcd`` modules of its own layer or of layers below it, never above it nor a
-sibling (``report`` and ``bench`` do not import each other). Checked on the source (every ``import``
-statement of every module, including those inside functions) and on a fresh interpreter (what
-importing a module actually loads); the check is shown to fail on a planted reverse import.
+sibling (``report``, ``bench`` and ``experiments`` do not import each other). Checked on the source
+(every ``import`` statement of every module, including those inside functions) and on a fresh
+interpreter (what importing a module actually loads); the check is shown to fail on a planted reverse
+import.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "evcd"
 
 #: Each folder's rank: a module may import evcd modules of a lower rank or of its own folder.
 RANKS = {
-    "utils": 0, "scenario": 1, "sim": 2, "env": 3, "agents": 4, "loops": 5, "report": 6, "bench": 6, "cli": 7,
+    "utils": 0, "scenario": 1, "sim": 2, "env": 3, "agents": 4, "loops": 5, "report": 6, "bench": 6,
+    "experiments": 6, "cli": 7,
 }  # fmt: skip
 #: Third-party modules a layer must not import.
 FORBIDDEN_LIBRARIES = {

@@ -2,7 +2,7 @@
 
 :class:`DQNConfig` is the one declaration: :class:`~evcd.agents.dqn.DQNAgent` takes it whole, and
 Hydra's ``learner`` block is built from it as a structured config (``conf/learner/*.yaml`` extend it,
-:mod:`evcd.cli.schema`), so a key that is not a field, or a value of the wrong type, is refused when
+:mod:`evcd.experiments.schema`), so a key that is not a field, or a value of the wrong type, is refused when
 the config is composed, and a value out of range when the agent is made.
 """
 

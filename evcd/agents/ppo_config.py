@@ -1,5 +1,5 @@
 """The hyperparameters of the PPO learner (:class:`PPOConfig`), declared once: the agent's Hydra block
-(``agent=ppo``, ``agent.<field>=...``) is made from these defaults (:mod:`evcd.cli.schema`).
+(``agent=ppo``, ``agent.<field>=...``) is made from these defaults (:mod:`evcd.experiments.schema`).
 
 The defaults were chosen for the default regime (``experiment=peak``: the ``time`` reward, minus
 hours per slot) on its tuning seed 100 and tuning days 2 and 5 only, among seven candidates, and

@@ -13,7 +13,7 @@ group ``evcd.agents`` (its ``pyproject.toml``); evcd reads the group at the firs
     my_set = "mypkg.agents:register"      # or a function that calls register_agent itself
 
 ``scripts/train.py agent=my_ppo`` and ``scripts/evaluate.py agent=my_ppo`` then find it: its Hydra
-block (``agent.*``) is its declared :attr:`~evcd.agents.base.Agent.options` (:mod:`evcd.cli.schema`),
+block (``agent.*``) is its declared :attr:`~evcd.agents.base.Agent.options` (:mod:`evcd.experiments.schema`),
 the tasks it takes are the observation layouts it declares (:attr:`~evcd.agents.base.Agent.obs_blocks`:
 3 for the single target, 4 for the fleet), and the loops need of it only the methods of
 :class:`~evcd.agents.base.Agent`. evcd registers its own learner PPO through its own entry point, the

@@ -1,11 +1,16 @@
 """Several environments in parallel: one process (one libsumo simulation) per environment.
 
-    envs = make_vector_env(4, evs=400)           # AsyncVectorEnv over 4 spawned processes
-    obs, infos = envs.reset(seed=0)              # sub-environment i gets seed 0 + i
-    obs, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
+    if __name__ == "__main__":                   # required in a script: see below
+        envs = make_vector_env(4, evs=400)       # AsyncVectorEnv over 4 spawned processes
+        obs, infos = envs.reset(seed=0)          # sub-environment i gets seed 0 + i
+        obs, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
 
 The background days' snapshots are built (or verified) in this process first, so the workers only
 read the cache; processes are *spawned*, not forked, because libsumo's state must not be copied.
+A spawned worker imports the main module again: a script that makes the vector environment at its
+top level, without the ``if __name__ == "__main__":`` guard, makes it again in every worker, and the
+workers die (Gymnasium reports a bare ``ConnectionResetError`` or ``EOFError``). Put the code that
+makes and uses the environments under the guard (or in a function it calls).
 """
 
 from __future__ import annotations

@@ -14,9 +14,9 @@ from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
 from evcd.agents import agent_names, make_agent_for_env
-from evcd.cli.params import demand_config, env_kwargs, fleet_kwargs
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
+from evcd.experiments.worlds import demand_config, env_kwargs, fleet_kwargs
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.loops.run_files import CSV_FIELDS
 from evcd.scenario.demand import DemandConfig

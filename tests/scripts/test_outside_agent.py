@@ -70,7 +70,7 @@ def test_register_agent_is_the_public_way_in(tiny_class):
         with pytest.raises(ValueError, match="registered already"):
             register_agent("tiny_by_hand", tiny_class)
         # its Hydra block is made from its declared options, with the name's defaults
-        from evcd.cli.schema import agent_block
+        from evcd.experiments.schema import agent_block
 
         block = {"name": "tiny_by_hand", "lr": 0.2, "epsilon": 0.3, "gamma": 0.9, "checkpoint": None}
         assert agent_block("tiny_by_hand") == block

@@ -13,8 +13,8 @@ import pytest
 from omegaconf import OmegaConf
 
 from evcd.agents import agent_names, make_agent_for_env
-from evcd.cli.params import fleet_kwargs
 from evcd.env.fleet import FleetEnv
+from evcd.experiments.worlds import fleet_kwargs
 from evcd.utils.checkpoint import load_checkpoint
 from tests.conftest import compose_config, run_script
 

@@ -25,8 +25,9 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from evcd.agents import agent_class
 from evcd.agents.dqn import DQNAgent
 from evcd.agents.dqn_config import DQNConfig
-from evcd.cli.params import agent_params, env_kwargs
+from evcd.cli.params import agent_params
 from evcd.env import ChargingNavEnv
+from evcd.experiments.worlds import env_kwargs
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.utils.checkpoint import load_checkpoint
 from tests.conftest import CONF, SCRIPTS, compose_config, run_script
