@@ -1,7 +1,8 @@
 """evcd's experiments as data a Python user can load: the worlds of ``conf/experiment/`` per split.
 
 - :mod:`evcd.experiments.make`: :func:`make_env` (what ``gymnasium.make("evcd/ChargingNav-v0",
-  experiment=..., split=...)`` makes) and :func:`parallel_env` (the fleet's PettingZoo environment);
+  experiment=..., split=...)`` makes), :func:`parallel_env` and :func:`aec_env` (the fleet's
+  PettingZoo environment, parallel and AEC);
 - :mod:`evcd.experiments.worlds`: a composed experiment -> each split's environment arguments and
   days (what ``scripts/train.py`` builds its environments with);
 - :mod:`evcd.experiments.compose`: an experiment composed as the script composes it;
@@ -9,12 +10,13 @@
 """
 
 from evcd.experiments.compose import CONF_DIR, compose_experiment, experiment_names
-from evcd.experiments.make import make_env, parallel_env
+from evcd.experiments.make import aec_env, make_env, parallel_env
 from evcd.experiments.worlds import SPLITS, split_days, split_kwargs
 
 __all__ = [
     "CONF_DIR",
     "SPLITS",
+    "aec_env",
     "compose_experiment",
     "experiment_names",
     "make_env",

@@ -5,6 +5,7 @@
     test = gymnasium.make("evcd/ChargingNav-v0", experiment="peak", split="eval")   # its held-out days
     from evcd.experiments import parallel_env
     fleet = parallel_env(experiment="fleet", split="eval", run_seed=0)            # the fleet table's
+    turns = aec_env(experiment="fleet", split="train")                             # its AEC form
 
 ``make_env`` is what the Gymnasium id ``evcd/ChargingNav-v0`` makes. With an ``experiment`` (a file of
 ``conf/experiment/``: :func:`~evcd.experiments.compose.experiment_names`) the environment is the one
@@ -28,6 +29,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from typing import Any
+
+from pettingzoo import AECEnv
+from pettingzoo.utils.conversions import parallel_to_aec
 
 from evcd.env.charging_nav import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
@@ -89,3 +93,15 @@ def parallel_env(
     """
     world = _world(experiment, split, run_seed, overrides, "fleet")
     return FleetEnv(**{**world, "normalize_obs": True, **kwargs})
+
+
+def aec_env(
+    experiment: str | None = None,
+    split: str = "train",
+    run_seed: int = 0,
+    overrides: Sequence[str] = (),
+    **kwargs: Any,
+) -> AECEnv:
+    """:func:`parallel_env` in PettingZoo's AEC form (:func:`evcd.env.fleet.aec_env`: the agents due at
+    a tick act in turn, the tick runs when the last has acted; the same episodes)."""
+    return parallel_to_aec(parallel_env(experiment, split, run_seed, overrides, **kwargs))

@@ -135,6 +135,12 @@ class InverseCdf:
         return int(min(np.searchsorted(self.cdf, rng.random(), side="right"), len(self.cdf) - 1))
 
 
+def ev_id(index: int) -> str:
+    """The SUMO id of a generated day's EV number ``index`` (``0 <= index < evs``, the same on every
+    day: a day's vehicles are ``ev0`` .. ``ev{evs-1}``)."""
+    return f"ev{index}"
+
+
 def vehicle_rng(seed: int, kind: int, index: int) -> np.random.Generator:
     """The random stream of one vehicle: independent of how many others there are.
 
@@ -228,7 +234,7 @@ def generate_demand(net: sumolib.net.Net, stations: list[Station], config: Deman
     for i, t, origin, dest, charges, cap, soc, target, sf in evs:
         trips.append(
             Trip(
-                f"ev{i}", EV_TYPE, t, origin, dest,
+                ev_id(i), EV_TYPE, t, origin, dest,
                 speed_factor=sf,
                 station=station_of.get(i),
                 battery_wh=round(float(cap), 1),

@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pettingzoo.test import parallel_api_test
+from pettingzoo.test import api_test, parallel_api_test
 
-from evcd.env.fleet import FleetEnv, draw_guided, in_window, read_charging_trips
+from evcd.env.fleet import FleetEnv, aec_env, draw_guided, in_window, read_charging_trips
 from evcd.env.fleet.trips import ChargingTrip
-from tests.conftest import FLEET_WINDOW
+from tests.conftest import FLEET_DEMAND, FLEET_WINDOW
 from tests.env.handmade import ev, write_routes
 
 
@@ -73,6 +73,36 @@ def test_parallel_api_test_passes(make_fleet) -> None:
     assert env.observation_space(env.possible_agents[0]).shape == (4 * len(env.stations),)
 
 
+def test_the_aec_form_passes_pettingzoos_api_test_and_plays_the_parallel_episodes(
+    make_fleet, grid_env_dir, env_cache
+) -> None:
+    aec = aec_env(scenario=grid_env_dir, cache_dir=env_cache, demand=FLEET_DEMAND,
+                  departure_window=FLEET_WINDOW, guided_share=0.5)  # fmt: skip
+    try:
+        api_test(aec, num_cycles=400)
+        # every agent picks its nearest station, in turn; the tick runs when the last has acted
+        aec.reset(seed=4)
+        for _agent in aec.agent_iter():
+            obs, _, terminated, truncated, _ = aec.last()
+            m = len(aec.unwrapped.stations)
+            aec.step(None if terminated or truncated else int(np.asarray(obs)[:m].argmin()))
+        aec_outcomes = aec.unwrapped.outcomes()
+    finally:
+        aec.close()
+    parallel = make_fleet(guided_share=0.5)
+    nearest = play(parallel, 4, lambda agent, obs, info: int(obs[: len(parallel.stations)].argmin()))
+    assert aec_outcomes == nearest["outcomes"] and len(aec_outcomes) > 1
+
+
+def test_possible_agents_are_known_without_generating_a_day(make_fleet, tmp_path) -> None:
+    env = make_fleet(guided_share=0.5, cache_dir=tmp_path / "fresh")
+    agents = env.possible_agents
+    assert agents[:3] == ["ev0", "ev1", "ev2"] and len(agents) == env.config.demand_config.evs
+    assert not (tmp_path / "fresh").exists()  # no day generated, nothing simulated
+    env.reset(seed=1)
+    assert env.agents and set(env.agents) <= set(agents)
+
+
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
@@ -96,6 +126,12 @@ def test_a_bad_action_names_the_agent_and_the_range(make_fleet) -> None:
         env.step({agent: 7})
     with pytest.raises(ValueError, match="not an agent of this step"):
         env.step({"nobody": 0})
+    # a bad action among good ones: none is applied (the good one is checked, not sent)
+    ev = env.guided[agent]
+    station, decisions = ev.station, ev.decisions
+    with pytest.raises(ValueError, match=r"actions\['nobody'\]|not an agent of this step"):
+        env.step({agent: (station + 1) % 3, "nobody": 0})
+    assert (ev.station, ev.decisions) == (station, decisions)
     with pytest.raises(TypeError, match=r"step takes a dict \{agent: station index\}.*not a list: \[0, 1\]"):
         env.step([0, 1])
     env.step({agent: 0})  # nothing was sent by the refused calls: the episode goes on

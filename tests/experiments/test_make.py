@@ -1,7 +1,7 @@
 """An experiment's worlds from Python (evcd.experiments): ``gymnasium.make(..., experiment=, split=)``
-and the fleet's ``parallel_env`` play the very episodes ``scripts/train.py`` plays (real Hydra
-composition, real SUMO on the script grid), the checks of Gymnasium and PettingZoo pass, and bad
-input is refused by name before SUMO starts."""
+and the fleet's ``parallel_env`` (and its AEC form) play the very episodes ``scripts/train.py``
+plays (real Hydra composition, real SUMO on the script grid), the checks of Gymnasium and PettingZoo
+pass, and bad input is refused by name before SUMO starts."""
 
 from __future__ import annotations
 
@@ -13,12 +13,19 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from pettingzoo.test import parallel_api_test
+from pettingzoo.test import api_test, parallel_api_test
 
 from evcd import ENV_ID
 from evcd.agents import make_agent_for_env
 from evcd.env.runners import FleetRunner
-from evcd.experiments import SPLITS, compose_experiment, experiment_names, parallel_env, split_days
+from evcd.experiments import (
+    SPLITS,
+    aec_env,
+    compose_experiment,
+    experiment_names,
+    parallel_env,
+    split_days,
+)
 from evcd.loops.fleet import fleet_spec
 from evcd.loops.seeds import episode_spec
 from tests.conftest import run_script
@@ -129,6 +136,12 @@ def test_the_fleet_experiment_plays_the_scripts_evaluation_episodes(script_overr
         parallel_api_test(env, num_cycles=200)
         rule = make_agent_for_env("queue_aware", env, np.random.default_rng(0))
         played = runner.run([fleet_spec(0, i, len(env.days)) for i in range(2)], rule)
+    aec = aec_env(experiment="fleet", split="eval", overrides=[*script_overrides, *FLEET_WORLD])
+    try:
+        assert aec.unwrapped.config == env.config
+        api_test(aec, num_cycles=100)
+    finally:
+        aec.close()
     assert [ep.row()["guided_travel"] for ep in played] == pytest.approx(
         [float(r["guided_travel"]) for r in script], abs=1e-9
     )

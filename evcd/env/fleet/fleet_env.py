@@ -44,7 +44,8 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium.utils import seeding
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
 
 from evcd.env.config import EnvConfig
 from evcd.env.episode_rules import TIME_EPS, Motion, check_action, slot_end_reason
@@ -56,6 +57,7 @@ from evcd.env.observation import MAX_VEHICLES, Observation, observation_bounds, 
 from evcd.env.reward import Slot
 from evcd.env.target import Target
 from evcd.env.world import InWorld, World
+from evcd.scenario.demand import ev_id
 from evcd.scenario.scenario import JURONG_WEST
 from evcd.sim.charge_record import ChargeRecord
 from evcd.sim.driver import SUMO_ERRORS
@@ -127,6 +129,7 @@ class FleetEnv(InWorld, ParallelEnv):
         high = np.concatenate([high, h_high]).astype(np.float32)
         self._obs_space = gymnasium.spaces.Box(np.zeros(4 * m, dtype=np.float32), high, dtype=np.float32)
         self._act_space = gymnasium.spaces.Discrete(m)
+        self.render_mode: str | None = None  # nothing to render (sumo-gui watches single targets)
         self.agents: list[str] = []
         self.guided: dict[str, GuidedEV] = {}  # this episode's guided EVs by vehicle id
         self.day: int | None = None
@@ -148,8 +151,15 @@ class FleetEnv(InWorld, ParallelEnv):
 
     @functools.cached_property
     def possible_agents(self) -> list[str]:  # type: ignore[override]
-        """Every charging EV of every day that departs in the window."""
-        return sorted({trip.vehicle for day in self.candidates for trip in day})
+        """Every vehicle that can become an agent, known without generating or simulating a day: with
+        generated demand every EV of a day (``ev0`` .. ``ev{evs-1}``; an episode's agents are the
+        charging ones departing in the window, whatever the day), with a ``route_file`` its charging
+        EVs departing in the window (read from the file)."""
+        cfg = self.config
+        if cfg.route_file is not None:
+            trips = in_window(read_charging_trips(cfg.route_file, self.stations), cfg.departure_window)
+            return sorted({trip.vehicle for trip in trips})
+        return [ev_id(i) for i in range(cfg.demand_config.evs)]
 
     @functools.cache  # noqa: B019  (PettingZoo wants the same object per agent)
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:
@@ -235,11 +245,13 @@ class FleetEnv(InWorld, ParallelEnv):
                             f"{type(actions).__name__}: {actions!r}")  # fmt: skip
         sim = self.simulation
         now = sim.time
+        chosen = {}  # every action checked before any is applied: a bad one leaves the episode as it was
         for agent, action in actions.items():
             ev = self.guided.get(agent)
             if ev is None or ev.stage is not Stage.ACTIVE:
-                raise ValueError(f"actions for {agent!r}: not an agent of this step (agents: env.agents)")
-            index = check_action(action, len(self.stations), f"actions[{agent!r}]")
+                raise ValueError(f"actions for {agent!r}: not an agent of this step (agents: {self.agents})")
+            chosen[agent] = (ev, check_action(action, len(self.stations), f"actions[{agent!r}]"))
+        for agent, (ev, index) in chosen.items():
             ev.decisions += 1
             if index == ev.station:
                 continue
@@ -420,3 +432,10 @@ class FleetEnv(InWorld, ParallelEnv):
 def parallel_env(**kwargs: Any) -> FleetEnv:
     """A :class:`FleetEnv` (PettingZoo's factory convention, as in sumo-rl)."""
     return FleetEnv(**kwargs)
+
+
+def aec_env(**kwargs: Any) -> AECEnv:
+    """The fleet in PettingZoo's AEC form (its conversion of :class:`FleetEnv`): the agents due at a
+    tick act one after the other, and the tick is simulated when the last of them has acted, so the
+    episodes are the parallel form's."""
+    return parallel_to_aec(FleetEnv(**kwargs))

@@ -1,0 +1,30 @@
+"""The examples run as a user runs them, from the repository (real SUMO on the script grid)."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from tests.conftest import run_script
+
+
+def test_the_gymnasium_loop_plays_both_splits(script_overrides) -> None:
+    overrides = [a for o in script_overrides for a in ("--override", o)]
+    proc = run_script("../examples/gymnasium_loop.py", "--episodes", "2", *overrides)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    out = proc.stdout
+    for split in ("train", "eval"):
+        assert len(re.findall(rf"^{split} episode \d: ", out, re.M)) == 2, out
+        mean = re.search(rf"^{split}: mean travel time ([0-9.]+) s$", out, re.M)
+        assert mean is not None and 0 < float(mean.group(1)) < 7200, out
+
+
+def test_the_examples_rule_takes_the_fewest_vehicles_per_point_then_the_nearest() -> None:
+    from examples.gymnasium_loop import fewest_per_point
+
+    #            D (km)         N            Z (per point)
+    obs = np.array([3.0, 1.0, 2.0, 0, 0, 0, 0.5, 0.5, 1.0], dtype=np.float32)
+    assert fewest_per_point(obs, 3) == 1  # stations 0 and 1 tie on Z; 1 is nearer
+    obs[7] = 0.75
+    assert fewest_per_point(obs, 3) == 0
