@@ -1,0 +1,93 @@
+"""stable-baselines3's PPO in evcd's own world: trained on the README job's training days
+(``experiment=peak``), evaluated on the very held-out episodes ``scripts/train.py experiment=peak``
+evaluates its learners on, beside evcd's queue_aware rule on the same episodes.
+
+    pip install -e ".[sb3]"
+    python examples/sb3_ppo.py --timesteps 12000 --envs 2          # about the README job's budget
+    python examples/sb3_ppo.py --timesteps 64 --episodes 2 --override evs=200   # a quick look
+
+One SUMO simulation per process (libsumo): with ``--envs`` > 1 the environments run in spawned
+processes (SB3's ``SubprocVecEnv``), so keep the ``if __name__ == "__main__":`` guard below.
+Observations come normalised (``D`` km, ``N`` tens, ``Z`` per charging point), what SB3's MLP wants.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+
+import gymnasium
+import numpy as np
+from stable_baselines3 import PPO
+from stable_baselines3.common.env_checker import check_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+import evcd  # noqa: F401  (registers evcd/ChargingNav-v0)
+from evcd.agents import make_agent_for_env
+from evcd.loops.seeds import episode_spec
+
+ENV_ID = "evcd/ChargingNav-v0"
+
+
+def make(split: str, overrides: list[str]) -> gymnasium.Env:
+    """The README job's world, ``split``'s days (``overrides``: ``scripts/train.py`` settings)."""
+    return gymnasium.make(ENV_ID, experiment="peak", split=split, overrides=overrides)
+
+
+def evaluate(model: PPO, overrides: list[str], episodes: int, seed: int) -> tuple[float, float]:
+    """Mean travel time (s) of the trained policy and of queue_aware on evaluation episodes
+    ``0..episodes-1`` of run ``seed`` (the episodes ``scripts/train.py seed=<seed>`` evaluates on)."""
+    env = make("eval", overrides)
+    rule = make_agent_for_env("queue_aware", env.unwrapped, np.random.default_rng(seed))
+    means = []
+    try:
+        for policy in ("ppo", "queue_aware"):
+            times = []
+            for i in range(episodes):
+                obs, info = env.reset(seed=episode_spec(seed, i).reset_seed)
+                rule.begin_episode()
+                done = False
+                while not done:
+                    if policy == "ppo":
+                        action = int(model.predict(obs, deterministic=True)[0])
+                    else:
+                        action = rule.act(obs)
+                    obs, _, terminated, truncated, info = env.step(action)
+                    done = terminated or truncated
+                times.append(info["travel_time"] if terminated else np.nan)
+            means.append(float(np.nanmean(times)))
+    finally:
+        env.close()
+    return means[0], means[1]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--timesteps", type=int, default=12_000, help="decisions to train on")
+    parser.add_argument("--envs", type=int, default=1, help="environments (one process each if > 1)")
+    parser.add_argument("--episodes", type=int, default=50, help="held-out evaluation episodes")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--n-steps", type=int, default=128, help="PPO's rollout per environment")
+    parser.add_argument("--override", action="append", default=[], help="a Hydra override (repeatable)")
+    args = parser.parse_args()
+
+    probe = make("train", args.override)
+    check_env(probe.unwrapped)  # SB3's own check of the environment
+    probe.close()
+    factory = functools.partial(make, "train", args.override)
+    vec = (DummyVecEnv([factory]) if args.envs == 1
+           else SubprocVecEnv([factory] * args.envs, start_method="spawn"))  # fmt: skip
+    vec.seed(args.seed)
+    model = PPO("MlpPolicy", vec, n_steps=args.n_steps, batch_size=min(64, args.n_steps * args.envs),
+                seed=args.seed, verbose=0)  # fmt: skip
+    model.learn(total_timesteps=args.timesteps)
+    vec.close()
+    ppo, rule = evaluate(model, args.override, args.episodes, args.seed)
+    print(f"trained {model.num_timesteps} decisions")
+    print(f"held-out: sb3 PPO {ppo:.1f} s, queue_aware {rule:.1f} s on the same {args.episodes} episodes")
+
+
+if __name__ == "__main__":
+    main()
