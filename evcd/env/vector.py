@@ -22,6 +22,7 @@ from typing import Any
 import gymnasium
 
 from evcd.env.charging_nav import ChargingNavEnv
+from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
 
@@ -41,8 +42,7 @@ def make_vector_env(
         ValueError: ``num_envs`` < 1, or an invalid environment argument (checked here, before any
             worker starts).
     """
-    if num_envs < 1:
-        raise ValueError(f"num_envs={num_envs}: must be >= 1")
+    check_int("num_envs", num_envs, minimum=1)
     probe = ChargingNavEnv(**env_kwargs)  # validates the arguments; SUMO only runs if it must build
     try:
         if prepare and probe.config.protocol == "fast":

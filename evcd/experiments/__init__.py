@@ -10,7 +10,7 @@
 """
 
 from evcd.experiments.compose import CONF_DIR, compose_experiment, experiment_names
-from evcd.experiments.make import aec_env, make_env, parallel_env
+from evcd.experiments.make import aec_env, make_env, make_vector_env, parallel_env
 from evcd.experiments.worlds import SPLITS, split_days, split_kwargs
 
 __all__ = [
@@ -20,6 +20,7 @@ __all__ = [
     "compose_experiment",
     "experiment_names",
     "make_env",
+    "make_vector_env",
     "parallel_env",
     "split_days",
     "split_kwargs",

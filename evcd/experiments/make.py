@@ -30,9 +30,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import gymnasium
 from pettingzoo import AECEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from evcd.env import vector
 from evcd.env.charging_nav import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.experiments.compose import compose_experiment
@@ -105,3 +107,23 @@ def aec_env(
     """:func:`parallel_env` in PettingZoo's AEC form (:func:`evcd.env.fleet.aec_env`: the agents due at
     a tick act in turn, the tick runs when the last has acted; the same episodes)."""
     return parallel_to_aec(parallel_env(experiment, split, run_seed, overrides, **kwargs))
+
+
+def make_vector_env(
+    num_envs: int,
+    experiment: str | None = None,
+    split: str = "train",
+    run_seed: int = 0,
+    overrides: Sequence[str] = (),
+    **kwargs: Any,
+) -> gymnasium.vector.AsyncVectorEnv:
+    """:func:`evcd.env.make_vector_env` (``num_envs`` spawned processes, one SUMO each) in
+    ``experiment``'s world for ``split``, observations normalised unless ``normalize_obs=False``;
+    keep the ``if __name__ == "__main__":`` guard in a script (the workers re-import it).
+
+    Raises:
+        ValueError: ``num_envs`` < 1, an unknown experiment or split, or a bad value (before any
+            worker starts).
+    """
+    world = _world(experiment, split, run_seed, overrides, "single")
+    return vector.make_vector_env(num_envs, **{**world, "normalize_obs": True, **kwargs})

@@ -23,6 +23,7 @@ from evcd.experiments import (
     aec_env,
     compose_experiment,
     experiment_names,
+    make_vector_env,
     parallel_env,
     split_days,
 )
@@ -145,3 +146,19 @@ def test_the_fleet_experiment_plays_the_scripts_evaluation_episodes(script_overr
     assert [ep.row()["guided_travel"] for ep in played] == pytest.approx(
         [float(r["guided_travel"]) for r in script], abs=1e-9
     )
+
+
+def test_the_subprocess_vector_env_takes_an_experiment(script_overrides) -> None:
+    envs = make_vector_env(2, experiment="peak", split="eval", overrides=script_overrides)
+    try:
+        obs, infos = envs.reset(seed=[episode_spec(0, i).reset_seed for i in range(2)])
+        assert obs.shape == (2, 3 * 3) and set(infos["day"]) <= {101, 102}
+        assert (obs[:, :3] < 50).all()  # D in km: normalised by default
+    finally:
+        envs.close()
+
+
+@pytest.mark.parametrize("size", [0, -2, 1.5, "2"])
+def test_a_vector_env_of_a_bad_size_is_refused_before_workers_start(size) -> None:
+    with pytest.raises(ValueError, match="num_envs"):
+        make_vector_env(size, experiment="peak")
