@@ -98,25 +98,11 @@ class TrainLog:
             w.add_scalar("losses/q_values", (now[2] - before[2]) / steps, step)
         self._totals = now
 
-    def evaluation(
-        self,
-        evaluation: Any,
-        baselines: Mapping[str, Any],
-        paired: Mapping[str, Mapping[str, Any]],
-        step: int,
-    ) -> None:
-        """Log the evaluation means (an :class:`~evcd.loops.stats.EvalResult` each) at ``step``."""
-        self.scalars(
-            evaluation.summary.mean_travel_time,
-            {name: base.summary.mean_travel_time for name, base in baselines.items()},
-            paired,
-            step,
-        )
-
     def scalars(
         self, value: float, baselines: Mapping[str, float], paired: Mapping[str, Mapping[str, Any]], step: int
     ) -> None:
-        """Log an evaluation: the agent's mean travel time, each baseline's and each paired difference."""
+        """Log an evaluation (either task: :meth:`evcd.loops.tasks.Task.score` of each summary): the
+        agent's mean travel time, each baseline's and each paired difference."""
         if math.isfinite(value):
             self.writer.add_scalar("eval/travel_time", value, step)
         for name, base in baselines.items():
