@@ -1,29 +1,29 @@
-"""stable-baselines3's PPO in evcd's own world: trained on the README job's training days
-(``experiment=peak``), evaluated on the very held-out episodes ``scripts/train.py experiment=peak``
-evaluates its learners on, beside evcd's queue_aware rule on the same episodes.
+"""stable-baselines3's PPO in evcd's own world at evcd's speed: trained on the README job's training
+days (``experiment=peak``) through the batched engine (the sweep vector environment,
+:mod:`evcd.env.sweep`, behind SB3's ``VecEnv``: :mod:`evcd.experiments.sb3`), evaluated on the very
+held-out episodes ``scripts/train.py experiment=peak`` evaluates its learners on, in the single
+environment, beside evcd's queue_aware rule on the same episodes.
 
     pip install -e ".[sb3]"
-    python examples/sb3_ppo.py --timesteps 12000 --envs 2          # about the README job's budget
+    python examples/sb3_ppo.py --timesteps 12000 --envs 16          # about the README job's budget
     python examples/sb3_ppo.py --timesteps 64 --episodes 2 --override evs=200   # a quick look
 
-One SUMO simulation per process (libsumo): with ``--envs`` > 1 the environments run in spawned
-processes (SB3's ``SubprocVecEnv``), so keep the ``if __name__ == "__main__":`` guard below.
 Observations come normalised (``D`` km, ``N`` tens, ``Z`` per charging point), what SB3's MLP wants.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 
 import gymnasium
 import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_checker import check_env
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 import evcd  # noqa: F401  (registers evcd/ChargingNav-v0)
 from evcd.agents import make_agent_for_env
+from evcd.experiments import make_sweep_env
+from evcd.experiments.sb3 import SB3VecEnv
 from evcd.loops.seeds import episode_spec
 
 ENV_ID = "evcd/ChargingNav-v0"
@@ -66,7 +66,7 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--timesteps", type=int, default=12_000, help="decisions to train on")
-    parser.add_argument("--envs", type=int, default=1, help="environments (one process each if > 1)")
+    parser.add_argument("--envs", type=int, default=16, help="targets co-simulated per SUMO run")
     parser.add_argument("--episodes", type=int, default=50, help="held-out evaluation episodes")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--n-steps", type=int, default=128, help="PPO's rollout per environment")
@@ -76,9 +76,7 @@ def main() -> None:
     probe = make("train", args.override)
     check_env(probe.unwrapped)  # SB3's own check of the environment
     probe.close()
-    factory = functools.partial(make, "train", args.override)
-    vec = (DummyVecEnv([factory]) if args.envs == 1
-           else SubprocVecEnv([factory] * args.envs, start_method="spawn"))  # fmt: skip
+    vec = SB3VecEnv(make_sweep_env(args.envs, experiment="peak", split="train", overrides=args.override))
     vec.seed(args.seed)
     model = PPO("MlpPolicy", vec, n_steps=args.n_steps, batch_size=min(64, args.n_steps * args.envs),
                 seed=args.seed, verbose=0)  # fmt: skip

@@ -8,6 +8,7 @@
     python scripts/bench.py --suite engines --episodes 200 --batch-sizes 25 100   # engine equivalence
     python scripts/bench.py --suite fleet --episodes 3   # a fleet episode vs its day alone (400 EVs, peak)
     python scripts/bench.py --suite determinism [train.py overrides ...]   # same seed, same result?
+    python scripts/bench.py --suite vector --num-envs 16 --steps 200   # the sweep vector env vs single
 
 ``--suite determinism`` trains the same short run twice (the README job cut to 200 training and 20
 evaluation episodes, on ``--scenario`` with ``--evs``; train.py overrides given after the options
@@ -41,6 +42,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from evcd.bench import engines as engine_bench
@@ -71,17 +73,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
-    p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet", "determinism"),
+    p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet", "determinism",
+                                       "vector"),
                    default="env",
                    help="env (default): episodes, SUMO, replay; replay: the replay buffer alone; "
                         "throughput: the batched engine's speed; engines: batched vs single; "
                         "fleet: a fleet episode against its day alone; determinism: the same "
-                        "training twice in fresh processes, compared")  # fmt: skip
+                        "training twice in fresh processes, compared; vector: the sweep vector "
+                        "environment against the single one, in the README job's world")  # fmt: skip
     p.add_argument("--episodes", type=int, default=200,
                    help="engines suite: episode seeds (default 200); fleet: episodes (~3)")  # fmt: skip
     p.add_argument("--guided-share", type=float, default=1.0, help="fleet suite: guided share (default 1)")
     p.add_argument("--batch-sizes", type=int, nargs="+", default=[25],
                    help="engines suite: batch_episodes values to compare (default 25)")  # fmt: skip
+    p.add_argument("--num-envs", type=int, default=16, help="vector suite: sub-environments (default 16)")
+    p.add_argument("--steps", type=int, default=200, help="vector suite: vector steps (default 200)")
+    p.add_argument("--sb3-timesteps", type=int, default=4096,
+                   help="vector suite: SB3 PPO's timesteps via the sweep (0: none; .[sb3])")  # fmt: skip
     p.add_argument("overrides", nargs="*", help="determinism suite: train.py overrides (e.g. agent=dqn)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -106,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
         log.info("wrote %s", args.out)
         return 0
     env_kwargs: dict = {"scenario": args.scenario, "evs": args.evs}
+    if args.suite == "vector":
+        return run_vector(args)
     if args.suite == "fleet":
         from evcd.bench.fleet import fleet_learning_rate, fleet_overhead
 
@@ -170,6 +180,63 @@ def main(argv: list[str] | None = None) -> int:
         log.info("%-45s %s", key, value)
     log.info("wrote %s", args.out)
     return 0
+
+
+def run_vector(args: argparse.Namespace) -> int:
+    """The sweep vector environment against the single environment in the README job's world
+    (``experiment=peak``, its training days, queue_aware), both measured in this run."""
+    from evcd.bench.vector import sweep_benchmark
+    from evcd.experiments.worlds import split_kwargs
+
+    overrides = [f"evs={args.evs}", f"scenario.path={args.scenario}"]
+    if args.cache_dir is not None:
+        overrides.append(f"env.cache_dir={args.cache_dir}")
+    try:
+        world = split_kwargs(compose_experiment("peak", overrides, conf_dir=CONF), "train", 0)
+        report = sweep_benchmark(world, args.num_envs, args.steps, args.fast_episodes)
+    except ValueError as exc:
+        log.error("%s", exc)
+        return 2
+    report["world"] = {k: str(v) for k, v in world.items() if k != "demand"}
+    if args.sb3_timesteps > 0:
+        report["sb3_ppo"] = sb3_rate(world, args.num_envs, args.sb3_timesteps)
+        sb3 = report["sb3_ppo"]
+        log.info("SB3 PPO learning through the sweep (%d envs): %.1f decisions/s over %d",
+                 args.num_envs, sb3["decisions_per_s"], sb3["decisions"])  # fmt: skip
+    atomic_write_text(args.out, json.dumps(report, indent=1))
+    s, one, eq = report["sweep"], report["single"], report["equivalence"]
+    two = report["make_vector_env_2"]
+    log.info("sweep (%d envs): %.1f decisions/s over %d decisions; single environment: %.1f decisions/s "
+             "(%.1fx); make_vector_env(2): %.1f decisions/s (%.1fx)", args.num_envs, s["decisions_per_s"],
+             s["decisions"], one["decisions_per_s"], report["speedup"], two["decisions_per_s"],
+             report["speedup_vs_make_vector_env_2"])  # fmt: skip
+    log.info("its %d episodes replayed alone (%d pairs): mean difference %+.1f s, mean |difference| %.1f s, "
+             "%d identical; wrote %s", eq["replayed"], eq["pairs"], eq["mean_difference_s"],
+             eq["mean_abs_difference_s"], eq["identical"], args.out)  # fmt: skip
+    return 0
+
+
+def sb3_rate(world: dict, num_envs: int, timesteps: int) -> dict:
+    """stable-baselines3's PPO learning through the sweep (its default MLP, 128 steps per rollout,
+    normalised observations): decisions per second, its first sweep's start (a snapshot load)
+    included."""
+    from stable_baselines3 import PPO
+
+    from evcd.env import ChargingNavEnv
+    from evcd.env.sweep import SweepVectorEnv
+    from evcd.experiments.sb3 import SB3VecEnv
+
+    venv = SB3VecEnv(SweepVectorEnv(ChargingNavEnv(**{**world, "normalize_obs": True}), num_envs))
+    try:
+        venv.seed(0)
+        model = PPO("MlpPolicy", venv, n_steps=128, batch_size=256, seed=0, verbose=0)
+        t0 = time.perf_counter()
+        model.learn(total_timesteps=timesteps)
+        wall = time.perf_counter() - t0
+    finally:
+        venv.close()
+    return {"decisions": int(model.num_timesteps), "wall_s": wall,
+            "decisions_per_s": model.num_timesteps / wall}  # fmt: skip
 
 
 #: The determinism suite's run: the README job, shorter.

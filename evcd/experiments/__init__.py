@@ -3,6 +3,9 @@
 - :mod:`evcd.experiments.make`: :func:`make_env` (what ``gymnasium.make("evcd/ChargingNav-v0",
   experiment=..., split=...)`` makes), :func:`parallel_env` and :func:`aec_env` (the fleet's
   PettingZoo environment, parallel and AEC);
+- :func:`make_sweep_env`: the batched engine as a Gymnasium vector environment in an experiment's
+  world (:mod:`evcd.env.sweep`); :mod:`evcd.experiments.sb3` puts it behind stable-baselines3's
+  ``VecEnv`` (the optional extra ``.[sb3]``);
 - :mod:`evcd.experiments.worlds`: a composed experiment -> each split's environment arguments and
   days (what ``scripts/train.py`` builds its environments with);
 - :mod:`evcd.experiments.compose`: an experiment composed as the script composes it;
@@ -10,7 +13,7 @@
 """
 
 from evcd.experiments.compose import CONF_DIR, compose_experiment, experiment_names
-from evcd.experiments.make import aec_env, make_env, make_vector_env, parallel_env
+from evcd.experiments.make import aec_env, make_env, make_sweep_env, make_vector_env, parallel_env
 from evcd.experiments.worlds import SPLITS, split_days, split_kwargs
 
 __all__ = [
@@ -20,6 +23,7 @@ __all__ = [
     "compose_experiment",
     "experiment_names",
     "make_env",
+    "make_sweep_env",
     "make_vector_env",
     "parallel_env",
     "split_days",

@@ -37,6 +37,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from evcd.env import vector
 from evcd.env.charging_nav import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
+from evcd.env.sweep import SweepVectorEnv
 from evcd.experiments.compose import compose_experiment
 from evcd.experiments.worlds import split_kwargs, task_of
 from evcd.utils.validation import check_int
@@ -127,3 +128,22 @@ def make_vector_env(
     """
     world = _world(experiment, split, run_seed, overrides, "single")
     return vector.make_vector_env(num_envs, **{**world, "normalize_obs": True, **kwargs})
+
+
+def make_sweep_env(
+    num_envs: int,
+    experiment: str | None = None,
+    split: str = "train",
+    run_seed: int = 0,
+    overrides: Sequence[str] = (),
+    **kwargs: Any,
+) -> SweepVectorEnv:
+    """The batched engine as a Gymnasium vector environment (:class:`~evcd.env.sweep.SweepVectorEnv`:
+    ``num_envs`` targets on one decision clock in one SUMO run per sweep) in ``experiment``'s world
+    for ``split``, observations normalised unless ``normalize_obs=False``.
+
+    Raises:
+        ValueError: ``num_envs`` < 1, an unknown experiment or split, or a bad value (before SUMO).
+    """
+    check_int("num_envs", num_envs, minimum=1)
+    return SweepVectorEnv(make_env(experiment, split, run_seed, overrides, **kwargs), num_envs)

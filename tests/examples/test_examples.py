@@ -32,8 +32,8 @@ def test_the_examples_rule_takes_the_fewest_vehicles_per_point_then_the_nearest(
 
 def test_stable_baselines3_ppo_trains_and_is_evaluated_beside_the_rule(script_overrides) -> None:
     overrides = [a for o in script_overrides for a in ("--override", o)]
-    proc = run_script("../examples/sb3_ppo.py", "--timesteps", "32", "--n-steps", "16", "--episodes", "2",
-                      *overrides)  # fmt: skip
+    tiny = ["--timesteps", "32", "--n-steps", "16", "--envs", "2", "--episodes", "2"]
+    proc = run_script("../examples/sb3_ppo.py", *tiny, *overrides)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert re.search(r"^trained (3[2-9]|4\d) decisions$", proc.stdout, re.M), proc.stdout
     held_out = re.search(r"^held-out: sb3 PPO ([0-9.]+) s, queue_aware ([0-9.]+) s on the same 2 episodes$",

@@ -23,6 +23,7 @@ from evcd.experiments import (
     aec_env,
     compose_experiment,
     experiment_names,
+    make_sweep_env,
     make_vector_env,
     parallel_env,
     split_days,
@@ -162,3 +163,17 @@ def test_the_subprocess_vector_env_takes_an_experiment(script_overrides) -> None
 def test_a_vector_env_of_a_bad_size_is_refused_before_workers_start(size) -> None:
     with pytest.raises(ValueError, match="num_envs"):
         make_vector_env(size, experiment="peak")
+
+
+def test_the_sweep_vector_env_takes_an_experiment(script_overrides) -> None:
+    vec = make_sweep_env(3, experiment="peak", split="eval", overrides=script_overrides)
+    try:
+        assert vec.env.config.demand_seeds == (101, 102) and vec.env.config.normalize_obs
+        obs, _ = vec.reset(seed=1)
+        assert obs.shape == (3, 9) and (obs[:, :3] < 50).all()
+        for _ in range(5):
+            obs, *_ = vec.step(np.zeros(3, dtype=np.int64))
+    finally:
+        vec.close()
+    with pytest.raises(ValueError, match="num_envs"):
+        make_sweep_env(0, experiment="peak")

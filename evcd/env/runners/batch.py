@@ -61,6 +61,8 @@ class BatchSimulation:
         reward: the reward of a slot.
         ids: the runner's source of SUMO ids.
         finished: called with each episode's row as it ends, in the order of the specs per step.
+        day: the background day (index; default the batch's); a batch that starts empty and gets
+            its targets as it goes (:mod:`evcd.env.sweep`) names it.
     """
 
     def __init__(
@@ -74,6 +76,7 @@ class BatchSimulation:
         reward: RewardFn,
         ids: TargetIds,
         finished: Finished,
+        day: int | None = None,
     ) -> None:
         self.env = env
         self.cfg = env.config
@@ -87,7 +90,7 @@ class BatchSimulation:
         self.reward = reward
         self.ids = ids
         self.finished = finished
-        self.day = batch[0].day
+        self.day = batch[0].day if day is None else day
         self.sumo_errors = 0
         self._roads: dict[str, str] | None = None  # road of each target on an edge this step
         self._events: list[tuple[LiveTarget, Transition | None, EpisodeRow | None]] = []
