@@ -18,16 +18,19 @@ A split is a set of background days with its departure window:
   target, one per evaluation episode for the fleet).
 
 Relative paths are resolved against the directory the process was started from (Hydra's original
-working directory inside a Hydra app).
+working directory inside a Hydra app); a relative ``scenario.path`` that is not there is taken from
+the project root, where the shipped scenarios are.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
+from evcd.experiments.compose import CONF_DIR
 from evcd.loops.seeds import days_of_seed
 from evcd.scenario.demand import DemandConfig
 from evcd.utils.validation import check_choice, check_int, is_integer
@@ -71,12 +74,23 @@ def env_kwargs(cfg: DictConfig) -> dict[str, Any]:
     for key in _PATH_KEYS:
         if kwargs.get(key) is not None:
             kwargs[key] = to_absolute_path(str(kwargs[key]))
-    kwargs["scenario"] = to_absolute_path(str(cfg.scenario.path))
+    kwargs["scenario"] = scenario_path(str(cfg.scenario.path))
     kwargs["charging_points"] = cfg.scenario.charging_points
     if kwargs.get("route_file") is None:
         kwargs["demand"] = demand_config(cfg)
         kwargs["evs"] = int(cfg.evs)
     return kwargs
+
+
+def scenario_path(path: str) -> str:
+    """``scenario.path`` as an absolute path: a relative one from the working directory (Hydra's
+    original one in a script) if it is there, else from the project root (where the shipped
+    scenarios are), so that the shipped experiments load from any working directory."""
+    here = to_absolute_path(path)
+    root = CONF_DIR.parent / path
+    if not Path(here).exists() and not Path(path).is_absolute() and root.exists():
+        return str(root)
+    return here
 
 
 def fleet_kwargs(cfg: DictConfig) -> dict[str, Any]:

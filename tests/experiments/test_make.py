@@ -30,6 +30,7 @@ from evcd.experiments import (
 )
 from evcd.loops.fleet import fleet_spec
 from evcd.loops.seeds import episode_spec
+from evcd.scenario.scenario import JURONG_WEST
 from tests.conftest import run_script
 from tests.scripts.test_train_fleet_script import FLEET
 
@@ -57,8 +58,10 @@ def test_every_experiment_composes_and_each_split_has_its_days() -> None:
     assert split_days(fleet, "eval", seed=1) == (111, 112, 113, 114, 115)
 
 
-def test_the_readme_world_from_gymnasium(tmp_path) -> None:
+def test_the_readme_world_from_gymnasium(tmp_path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)  # the shipped scenario is found from any working directory
     env = gymnasium.make(ENV_ID, experiment="peak", split="train", cache_dir=tmp_path)  # no SUMO yet
+    assert env.unwrapped.scenario.root == JURONG_WEST
     world = env.unwrapped.config
     assert world.demand_seeds == (0, 3) and world.departure_window == (25200.0, 36000.0)
     assert world.reward == "time" and world.demand_config.evs == 400 and world.normalize_obs
