@@ -41,6 +41,7 @@ truncations at the window's end. One seed gives the same sweeps, episodes and re
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import logging
@@ -169,6 +170,8 @@ class SweepVectorEnv(gymnasium.vector.VectorEnv):
         env: the world (scenario, days, window, reward, observation units, rules); its own episode
             API is not used, and closing the vector env closes it.
         num_envs: targets at once (>= 1).
+        keep_episodes: how many of the latest finished episodes :attr:`episodes` keeps (their rows
+            and plans: what a replay in the single environment needs).
 
     Raises:
         ValueError: ``num_envs`` < 1, or the ``paper`` protocol (a sweep starts from a snapshot).
@@ -176,8 +179,9 @@ class SweepVectorEnv(gymnasium.vector.VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP}  # noqa: RUF012  (gymnasium's convention)
 
-    def __init__(self, env: ChargingNavEnv, num_envs: int) -> None:
+    def __init__(self, env: ChargingNavEnv, num_envs: int, keep_episodes: int = 10_000) -> None:
         self.num_envs = check_int("num_envs", num_envs, minimum=1)
+        check_int("keep_episodes", keep_episodes, minimum=0)
         if not isinstance(env.unwrapped, ChargingNavEnv):
             raise ValueError(f"a sweep needs a ChargingNavEnv, not {type(env.unwrapped).__name__}")
         self.env = env.unwrapped
@@ -193,8 +197,8 @@ class SweepVectorEnv(gymnasium.vector.VectorEnv):
         self._slots = _Slots()
         self._order = 0
         self.sweeps = 0  # SUMO runs (for the benchmark)
-        #: every finished episode, in the order they ended (the caller may clear it)
-        self.episodes: list[SweepEpisode] = []
+        #: the latest ``keep_episodes`` finished episodes, in the order they ended
+        self.episodes: collections.deque[SweepEpisode] = collections.deque(maxlen=keep_episodes)
 
     # ------------------------------------------------------------------ the API
     def reset(

@@ -169,3 +169,15 @@ def test_stable_baselines3_learns_through_the_adapter(make_env) -> None:
         assert venv.get_attr("num_envs") == [4] * 4 and venv.env_is_wrapped(object) == [False] * 4
     finally:
         venv.close()
+
+
+def test_only_the_latest_episodes_are_kept(make_env) -> None:
+    env = make_env(**WORLD)
+    vec = SweepVectorEnv(env, 3, keep_episodes=5)
+    try:
+        _play(vec, _rule(env, vec), 30)
+        assert len(vec.episodes) == 5
+    finally:
+        vec.close()
+    with pytest.raises(ValueError, match="keep_episodes=-1"):
+        SweepVectorEnv(make_env(**WORLD), 2, keep_episodes=-1)
