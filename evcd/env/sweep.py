@@ -250,6 +250,10 @@ class SweepVectorEnv(gymnasium.vector.VectorEnv):
             for slot in ended:  # the next target of the slot departs now, observed one step later
                 self._new_target(int(slot), sweep.sim.time)
             if len(ended) and not self._run(sweep, sweep.sim.time + cfg.step_length):
+                # SUMO failed while the new targets entered: the episodes it cut end in this step too
+                _, more_terminated, more_truncated, more = self._collect(sweep)
+                terminated, truncated = terminated | more_terminated, truncated | more_truncated
+                infos = _merge_final(infos, more)
                 self._start_sweep()
         return self._observations(), rewards, terminated, truncated, infos
 
@@ -362,3 +366,16 @@ class SweepVectorEnv(gymnasium.vector.VectorEnv):
                 sweep.due_at[slot] = now
             obs[slot] = live.obs.vector  # type: ignore[union-attr]
         return obs
+
+
+def _merge_final(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    """The final-step infos of two collections of ended episodes (disjoint slots)."""
+    if not a or not b:
+        return a or b
+    mask = b["_final_obs"]
+    a["final_obs"][mask] = b["final_obs"][mask]
+    a["_final_obs"] = a["_final_info"] = a["_final_obs"] | mask
+    for key in ("reason", "travel_time"):
+        a["final_info"][key][mask] = b["final_info"][key][mask]
+        a["final_info"][f"_{key}"] = a["_final_obs"]
+    return a

@@ -181,3 +181,37 @@ def test_only_the_latest_episodes_are_kept(make_env) -> None:
         vec.close()
     with pytest.raises(ValueError, match="keep_episodes=-1"):
         SweepVectorEnv(make_env(**WORLD), 2, keep_episodes=-1)
+
+
+def test_a_sumo_failure_while_targets_enter_ends_the_episodes_in_flight_and_starts_a_sweep(
+    make_env, monkeypatch
+) -> None:
+    from evcd.env import sweep as sweep_module
+    from evcd.sim.driver import SUMO_ERRORS
+
+    env = make_env(**WORLD)
+    vec = SweepVectorEnv(env, 3)
+    real = sweep_module._Sweep.run_to
+    armed = [False]
+
+    def failing(self, until):
+        if armed[0] and until - self.sim.time <= env.config.step_length + 1e-9:  # the refill step
+            armed[0] = False
+            raise SUMO_ERRORS[0]("planted failure")
+        return real(self, until)
+
+    monkeypatch.setattr(sweep_module._Sweep, "run_to", failing)
+    try:
+        obs, _ = vec.reset(seed=3)
+        policy = _rule(env, vec)
+        armed[0] = True
+        for _ in range(30):
+            before = vec.sweeps
+            obs, _, terminated, truncated, infos = vec.step(policy(obs))
+            if vec.sweeps > before:
+                break
+        assert not armed[0] and vec.sweeps == 2
+        assert (terminated | truncated).all()  # the ended ones and those the failure cut
+        assert "sumo_error" in set(infos["final_info"]["reason"]) and obs in vec.observation_space
+    finally:
+        vec.close()
