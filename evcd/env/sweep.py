@@ -88,8 +88,6 @@ class _Slots:
     """What :class:`BatchSimulation` hands an agent, kept per slot instead (the vector env answers
     the decisions itself)."""
 
-    learns = True
-
     def __init__(self) -> None:
         self.transitions: dict[int, Transition] = {}
 

@@ -227,7 +227,8 @@ def train_and_evaluate(
         CheckpointError: the checkpoint is corrupted, of the other task, or does not fit the agent.
     """
     run_dir = Path(run_dir)
-    task = task_of(runners("eval"))  # making a runner starts nothing
+    runner = runners("eval")  # made now to know the task; it starts nothing until the evaluation
+    task = task_of(runner)
     state, tlog = start_run(run_dir, agent, resume, config, task.state, on_start)
     episodes = settings.episodes if agent.learns else 0
     try:
@@ -240,7 +241,6 @@ def train_and_evaluate(
                            state, config, tlog, validator)  # fmt: skip
         check_learned(agent, episodes)
         selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
-        runner = runners("eval")
         evaluation, bases = _evaluate(agent, runner, settings, baselines or {})
         paired = {name: task.paired(evaluation.rows, base.rows, settings.seed, settings.resamples)
                   for name, base in bases.items()}  # fmt: skip
