@@ -36,7 +36,33 @@ def test_stable_baselines3_ppo_trains_and_is_evaluated_beside_the_rule(script_ov
     proc = run_script("../examples/sb3_ppo.py", *tiny, *overrides)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert re.search(r"^trained (3[2-9]|4\d) decisions$", proc.stdout, re.M), proc.stdout
-    held_out = re.search(r"^held-out: sb3 PPO ([0-9.]+) s, queue_aware ([0-9.]+) s on the same 2 episodes$",
-                         proc.stdout, re.M)  # fmt: skip
+    held_out = re.search(
+        r"^held-out: sb3 PPO ([0-9.]+) s, queue_aware ([0-9.]+) s on the same 2 episodes$", proc.stdout, re.M
+    )
     assert held_out is not None, proc.stdout
     assert all(0 < float(v) < 7200 for v in held_out.groups())
+
+
+def test_torchrl_trains_a_shared_policy_on_the_fleet(script_overrides) -> None:
+    """TorchRL's PPO on the fleet's slot view (grid world): every batch has EV decisions, trips end with
+    a travel time, and the shared policy's weights change."""
+    fleet = [
+        "evs=300",
+        "scenario.demand.charging_share=0.6",
+        "env.departure_window=[21600,25200]",
+        "days.train=[0]",
+    ]
+    overrides = [a for o in [*script_overrides, *fleet] for a in ("--override", o)]
+    proc = run_script(
+        "../examples/torchrl_fleet.py", "--batches", "3", "--frames", "30", "--slots", "40", *overrides
+    )
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    rows = re.findall(
+        r"^batch (\d): (\d+) EV decisions, (\d+) trips ended, mean travel time ([0-9.]+) s$",
+        proc.stdout,
+        re.M,
+    )
+    assert [int(r[0]) for r in rows] == [0, 1, 2], proc.stdout
+    assert all(int(r[1]) > 0 for r in rows) and sum(int(r[2]) for r in rows) > 0
+    assert all(0 < float(r[3]) < 7200 for r in rows)
+    assert re.search(r"^policy weights changed by [0-9.e+-]+ \(L2\)$", proc.stdout, re.M), proc.stdout
