@@ -43,6 +43,7 @@ from evcd.env.world import InWorld, World
 from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.scenario import JURONG_WEST
 from evcd.sim.driver import SUMO_ERRORS
+from evcd.sim.perturbations import Perturbations
 
 log = logging.getLogger(__name__)
 
@@ -94,6 +95,9 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
         max_insert_delay: seconds the target may wait for insertion before another origin is drawn.
         gui: watch the episodes in ``sumo-gui`` (through TraCI, slow); day snapshots are still built
             headless with libsumo.
+        perturbations: a day that is not calm (:mod:`evcd.sim.perturbations`: e.g.
+            ``{"outages": {"per_day": 2}}``, charger outages drawn from each day's seed); ``None``
+            (default): every day calm, as before.
 
     Every invalid argument raises ``ValueError`` naming it before SUMO starts. The seed is given
     through ``reset(seed=...)``: one generator drives the day, the departure, the origin and the
@@ -127,6 +131,7 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
         day_end: float = PAPER_DAY_END,
         max_insert_delay: float = 600.0,
         gui: bool = False,
+        perturbations: Perturbations | Mapping[str, Any] | None = None,
     ) -> None:
         self.world = World(EnvConfig(
             scenario=scenario, evs=evs, decision_interval=decision_interval,
@@ -135,6 +140,7 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
             demand=demand, demand_seeds=demand_seeds, route_file=route_file, cache_dir=cache_dir,
             snapshot_every=snapshot_every, step_length=step_length, time_to_teleport=time_to_teleport,
             stuck_limit=stuck_limit, day_end=day_end, max_insert_delay=max_insert_delay, gui=gui,
+            perturbations=perturbations,
         ))  # fmt: skip
         m = len(self.stations)
         self.action_space = gymnasium.spaces.Discrete(m)

@@ -10,6 +10,7 @@ from typing import Any
 
 from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.scenario import JURONG_WEST, Scenario, load_scenario
+from evcd.sim.perturbations import Perturbations
 from evcd.sim.snapshots import DaySpec
 from evcd.utils.validation import check_choice, check_int, check_real, is_integer
 
@@ -46,6 +47,7 @@ class EnvConfig:
     day_end: float = PAPER_DAY_END
     max_insert_delay: float = 600.0
     gui: bool = False
+    perturbations: Perturbations | Mapping[str, Any] | None = None
     demand_config: DemandConfig = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -91,6 +93,7 @@ class EnvConfig:
             if not Path(self.route_file).is_file():
                 raise ValueError(f"route_file={str(self.route_file)!r}: no such file")
         object.__setattr__(self, "demand_config", self._demand_config())
+        object.__setattr__(self, "perturbations", Perturbations.from_value(self.perturbations))
 
     def _demand_config(self) -> DemandConfig:
         demand = self.demand
@@ -120,7 +123,10 @@ class EnvConfig:
         except (FileNotFoundError, ValueError) as exc:
             raise ValueError(f"scenario={str(self.scenario)!r}: {exc}") from exc
         common = {"step_length": self.step_length, "time_to_teleport": self.time_to_teleport}
+        events = self.perturbations.outages_of  # the day's own, drawn from its seed
         if self.route_file is not None:
-            return scenario, [DaySpec(scenario, route_file=Path(self.route_file).resolve(), **common)]
-        days = [DaySpec(scenario, self.demand_config, seed, **common) for seed in self.demand_seeds]
+            return scenario, [DaySpec(scenario, route_file=Path(self.route_file).resolve(),
+                                      outages=events(scenario.stations, 0), **common)]  # fmt: skip
+        days = [DaySpec(scenario, self.demand_config, seed, outages=events(scenario.stations, seed), **common)
+                for seed in self.demand_seeds]  # fmt: skip
         return scenario, days

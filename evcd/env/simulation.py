@@ -134,8 +134,10 @@ class EpisodeSimulation:
         self._ready.add(day)
 
     def start_at(self, day: int, time: float) -> None:
-        """Position the simulation of day ``day`` at ``time`` (s of day), controller included."""
+        """Position the simulation of day ``day`` at ``time`` (s of day), controller included (with the
+        day's charger outages)."""
         self.prepare(day)
+        self.controller.use_outages(self.caches[day].spec.outages)
         if self.protocol == "paper":
             self._restart(day)
             self.controller.load_state_dict(self._fresh_controller)

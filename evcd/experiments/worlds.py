@@ -60,7 +60,8 @@ def demand_config(cfg: DictConfig) -> DemandConfig:
 
 
 def env_kwargs(cfg: DictConfig) -> dict[str, Any]:
-    """Keyword arguments of :class:`~evcd.env.ChargingNavEnv` from ``scenario``, ``evs`` and ``env``.
+    """Keyword arguments of :class:`~evcd.env.ChargingNavEnv` from ``scenario``, ``evs``, ``env`` and
+    ``perturbations`` (an empty block, ``perturbations=none``: ``None``, every day calm).
 
     With ``env.route_file`` set, the route file is the whole background day: ``evs`` and
     ``scenario.demand`` are left out (the env refuses both together).
@@ -75,6 +76,8 @@ def env_kwargs(cfg: DictConfig) -> dict[str, Any]:
         if kwargs.get(key) is not None:
             kwargs[key] = to_absolute_path(str(kwargs[key]))
     kwargs["scenario"] = scenario_path(str(cfg.scenario.path))
+    block = OmegaConf.select(cfg, "perturbations")
+    kwargs["perturbations"] = (OmegaConf.to_container(block, resolve=True) if block else None) or None
     kwargs["charging_points"] = cfg.scenario.charging_points
     if kwargs.get("route_file") is None:
         kwargs["demand"] = demand_config(cfg)

@@ -15,6 +15,9 @@ Per vehicle (SUMO vehicle ``<param>``):
   charging and may :meth:`~ChargingController.release` it). :meth:`~ChargingController.hold` does
   the same without a parameter.
 
+Charging points may be out of service for a while (``outages``, :mod:`evcd.sim.outages`): the FIFO
+then serves fewer points, and a vehicle whose point fails goes back to the head of the queue.
+
 The controller is driven explicitly, once after every simulation step::
 
     controller = ChargingController(read_stations(path))
@@ -38,6 +41,7 @@ from typing import Any
 from evcd.scenario.stations_file import Station
 from evcd.sim.charge_record import ChargeRecord, Outcome
 from evcd.sim.driver import SUMO_ERRORS
+from evcd.sim.outages import Outage, check_outages, points_in_service
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +93,10 @@ class ChargingController:
         stations: the scenario's stations (their ``points`` and car parks are used).
         default_target_soc: release SoC for vehicles without ``evcd.targetSoc``.
         hold: ids of vehicles never to release (like ``evcd.hold=1``).
+        outages: charging points out of service over given periods (:mod:`evcd.sim.outages`).
+
+    Raises:
+        ValueError: no stations, a bad target SoC, repeated ids or car parks, or a bad outage.
     """
 
     def __init__(
@@ -96,6 +104,7 @@ class ChargingController:
         stations: Sequence[Station],
         default_target_soc: float = DEFAULT_TARGET_SOC,
         hold: Iterable[str] = (),
+        outages: Iterable[Outage] = (),
     ) -> None:
         if not stations:
             raise ValueError("ChargingController needs at least one station")
@@ -109,7 +118,18 @@ class ChargingController:
         self.default_target_soc = default_target_soc
         self._by_lot = {st.parking_area: st.id for st in stations}
         self._hold: set[str] = set(hold)
+        self.use_outages(outages)
         self._reset()
+
+    def use_outages(self, outages: Iterable[Outage]) -> None:
+        """Make ``outages`` the points out of service from now on (a day's own: a controller that
+        plays several days is given each day's before it plays it).
+
+        Raises:
+            ValueError: a bad outage (:func:`~evcd.sim.outages.check_outages`).
+        """
+        self.outages = check_outages(outages, self.stations)
+        self._out = {st.id: tuple(o for o in self.outages if o.station == st.id) for st in self.stations}
 
     def _reset(self) -> None:
         self._st = {st.id: _StationState(st) for st in self.stations}
@@ -144,8 +164,11 @@ class ChargingController:
             self._reconcile(api, st, time)
             if st.charging:
                 self._release_charged(api, st, time)
+            points = self.points_in_service(st.station.id, time)
+            if len(st.charging) > points:
+                self._interrupt(api, st, points, time)
             if st.queue:
-                self._fill_points(api, st, time)
+                self._fill_points(api, st, points, time)
         for vid in self._joined:  # joined this step and no point free: hold it
             visit = self._visits.get(vid)
             if visit is None or visit.zeroed or self._records[visit.record].start_time is not None:
@@ -237,8 +260,22 @@ class ChargingController:
             visit.next_read = time if remaining <= _POLL_EVERY_STEP_S else time + _AHEAD * remaining
         visit.read_time, visit.read_soc = time, soc
 
-    def _fill_points(self, api: Any, st: _StationState, time: float) -> None:
-        while st.queue and len(st.charging) < st.station.points:
+    def _interrupt(self, api: Any, st: _StationState, points: int, time: float) -> None:
+        """Points failed: the vehicles that started last stop and go back to the queue's head."""
+        while len(st.charging) > points:
+            vid = st.charging.pop()
+            visit = self._visits[vid]
+            if not self._set_rate(api, vid, "0", time):
+                st.charging.append(vid)
+                self._end(api, vid, time, Outcome.VANISHED)
+                continue
+            visit.zeroed = True
+            st.queue.insert(0, vid)
+            log.debug("t=%s %s's point at %s is out of service: back to the queue's head", time, vid,
+                      st.station.id)  # fmt: skip
+
+    def _fill_points(self, api: Any, st: _StationState, points: int, time: float) -> None:
+        while st.queue and len(st.charging) < points:
             vid = st.queue.pop(0)
             visit = self._visits[vid]
             rec = self._records[visit.record]
@@ -251,11 +288,13 @@ class ChargingController:
             if soc is None:
                 self._end(api, vid, time, Outcome.VANISHED)
                 continue
-            rec.start_time, rec.soc_start = time, soc
             visit.read_time, visit.read_soc, visit.next_read = time, soc, time + _PROBE_S
             if soc + _SOC_TOL >= rec.target_soc:
                 visit.next_read = time  # already there: released at the next update
             st.charging.append(vid)
+            if rec.start_time is not None:  # resumes after its point failed: not a new start
+                continue
+            rec.start_time, rec.soc_start = time, soc
             self._started.append(visit.record)
             log.debug("t=%s %s starts charging at %s (soc %.3f)", time, vid, st.station.id, soc)
 
@@ -343,6 +382,10 @@ class ChargingController:
         """Vehicles waiting for a point at ``station``."""
         return len(self._st[station].queue)
 
+    def points_in_service(self, station: str, time: float) -> int:
+        """Charging points of ``station`` in service at ``time`` (its points less its outages')."""
+        return points_in_service(self._st[station].station.points, self._out[station], time)
+
     def charging(self, station: str) -> int:
         """Vehicles holding a point at ``station``."""
         return len(self._st[station].charging)
@@ -364,7 +407,7 @@ class ChargingController:
         visit = self._visits.get(vid)
         if visit is None:
             return None
-        return "waiting" if self._records[visit.record].start_time is None else "charging"
+        return "charging" if vid in self._st[self._records[visit.record].station].charging else "waiting"
 
     def started_this_step(self) -> list[ChargeRecord]:
         """Visits that got a point in the last :meth:`update` (their ``start_time`` is exact)."""

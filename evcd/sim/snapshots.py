@@ -61,6 +61,7 @@ from evcd.scenario.demand import DemandConfig, generate_demand, write_demand
 from evcd.scenario.scenario import Scenario
 from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SumoDriver
+from evcd.sim.outages import Outage, check_outages
 from evcd.utils.atomic import atomic_write_text
 
 log = logging.getLogger(__name__)
@@ -77,7 +78,8 @@ _BAR = "{desc}: {percentage:3.0f}% of {total:.0f} sim s [{elapsed}<{remaining}]"
 # the modules (each evcd module these import is listed: tests/sim/test_snapshots.py) and the packages
 # (numpy draws the demand, sumolib reads the network) that shape a cached day: a change invalidates it
 _CODE = ("scenario/demand.py", "scenario/routing.py", "scenario/scenario.py", "scenario/stations_file.py",
-         "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/driver.py", "sim/snapshots.py",
+         "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/driver.py", "sim/outages.py",
+         "sim/snapshots.py",
          "utils/atomic.py", "utils/sumo_tools.py", "utils/xml_files.py")  # fmt: skip
 _PACKAGES = ("numpy", "sumolib")
 
@@ -133,6 +135,8 @@ class DaySpec:
         route_file: a fixed SUMO route file used as the day's demand instead of generating one.
         step_length: SUMO step (s).
         time_to_teleport: SUMO's jam teleport threshold (s).
+        outages: the day's charger outages (:mod:`evcd.sim.perturbations` draws them from its
+            seed); part of the key only when there are some, so a calm day's key has no trace of them.
     """
 
     scenario: Scenario
@@ -141,10 +145,12 @@ class DaySpec:
     route_file: Path | None = None
     step_length: float = 1.0
     time_to_teleport: float = 300.0
+    outages: tuple[Outage, ...] = ()
 
     def __post_init__(self) -> None:
         if (self.demand is None) == (self.route_file is None):
             raise ValueError("a DaySpec needs exactly one of demand and route_file")
+        object.__setattr__(self, "outages", check_outages(self.outages, self.scenario.stations))
 
     @property
     def sumo_seed(self) -> int:
@@ -156,7 +162,7 @@ class DaySpec:
         """The key's ingredients (JSON-serialisable); hashing the files takes a moment."""
         sc = self.scenario
         demand = None if self.demand is None else dataclasses.asdict(self.demand)
-        return {
+        fields = {
             "format": FORMAT_VERSION,
             "sumo": libsumo.getVersion()[1],
             "packages": {name: importlib.metadata.version(name) for name in _PACKAGES},
@@ -171,6 +177,9 @@ class DaySpec:
             "step_length": float(self.step_length),
             "time_to_teleport": float(self.time_to_teleport),
         }
+        if self.outages:
+            fields["outages"] = [dataclasses.asdict(o) for o in self.outages]
+        return fields
 
     @cached_property
     def key(self) -> str:
@@ -403,7 +412,7 @@ class DayCache:
             raise CacheError("building day snapshots needs this process's libsumo: close the running one")
         t0 = wallclock.perf_counter()
         entries = dict(manifest.get("snapshots", {}))
-        controller = ChargingController(self.spec.scenario.stations)
+        controller = ChargingController(self.spec.scenario.stations, outages=self.spec.outages)
         log.info(
             "day cache %s: simulating the day to %.0f s for %d snapshots", self.dir, missing[-1], len(missing)
         )

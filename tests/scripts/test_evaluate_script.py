@@ -27,7 +27,7 @@ FLEET = ["task=fleet", "evs=300", "scenario.demand.charging_share=0.6", "env.dep
          "episodes=1"]  # fmt: skip
 
 #: Set by the scenario group, the top-level `evs` or derived: not in conf/env.
-NOT_IN_ENV_GROUP = {"self", "scenario", "evs", "charging_points", "demand"}
+NOT_IN_ENV_GROUP = {"self", "scenario", "evs", "charging_points", "demand", "perturbations"}
 
 
 def run_evaluate(*overrides: str) -> subprocess.CompletedProcess:

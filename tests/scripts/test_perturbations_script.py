@@ -1,0 +1,89 @@
+"""``perturbations=...`` through the scripts (real Hydra, real SUMO on the grid): the group composes
+into the environments' arguments, a perturbed run plays its days' outages, bad values stop the run
+before SUMO starts, and ``none`` leaves every argument as before."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from hydra.errors import ConfigCompositionException
+
+from evcd.env import ChargingNavEnv
+from evcd.experiments.worlds import env_kwargs, fleet_kwargs, split_kwargs
+from tests.conftest import compose_config, run_script
+
+
+def test_none_is_the_default_and_adds_nothing():
+    cfg = compose_config("train")
+    assert env_kwargs(cfg)["perturbations"] is None
+    assert env_kwargs(compose_config("train", "perturbations=none")) == env_kwargs(cfg)
+    assert compose_config("evaluate").perturbations == {}
+
+
+def test_outages_reach_every_split_and_the_fleet():
+    cfg = compose_config("train", "perturbations=outages", "perturbations.outages.per_day=4")
+    for split in ("train", "tuning", "eval"):
+        assert split_kwargs(cfg, split, 0)["perturbations"]["outages"]["per_day"] == 4
+    fleet = compose_config("train", "experiment=fleet", "perturbations=outages")
+    assert fleet_kwargs(fleet)["perturbations"]["outages"]["minutes"] == [30.0, 180.0]
+
+
+def test_an_unknown_option_is_refused_by_hydra():
+    with pytest.raises(ConfigCompositionException, match="perturbations"):
+        compose_config("train", "perturbations=hail")
+
+
+def test_a_perturbed_run_plays_its_days_outages(script_overrides, tmp_path):
+    run = tmp_path / "run"
+    proc = run_script(
+        "train.py",
+        *script_overrides,
+        "agent=queue_aware",
+        "eval.episodes=3",
+        "eval.baselines=[]",
+        "perturbations=outages",
+        "perturbations.outages.per_day=20",
+        "perturbations.outages.start_window=[18000,23400]",
+        f"hydra.run.dir={run}",
+    )
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    data = json.loads((run / "results.json").read_text())
+    assert data["config"]["perturbations"]["outages"]["per_day"] == 20
+    cfg = compose_config(
+        "train",
+        *script_overrides,
+        "perturbations=outages",
+        "perturbations.outages.per_day=20",
+        "perturbations.outages.start_window=[18000,23400]",
+    )
+    env = ChargingNavEnv(**split_kwargs(cfg, "eval", 0))
+    try:  # the days the run evaluated on have outages in the window, in their cache keys
+        assert all(day.outages and "outages" in day.fields for day in env.world.days)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("perturbations.outages.per_day=-1", "perturbations.outages.per_day"),
+        ("perturbations.outages.minutes=[100,10]", "perturbations.outages.minutes=[100, 10]"),
+        ("+perturbations.rain={factor: 0.8}", "perturbations.rain: not drawn yet"),
+    ],
+)
+def test_bad_perturbations_stop_the_run_before_sumo(override, message, script_overrides, tmp_path):
+    cache = tmp_path / "cache"
+    overrides = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
+    proc = run_script(
+        "train.py",
+        *overrides,
+        f"env.cache_dir={cache}",
+        "agent=greedy",
+        "perturbations=outages",
+        override,
+        f"hydra.run.dir={tmp_path / 'run'}",
+    )
+    assert proc.returncode == 2, (proc.stdout + proc.stderr)[-2000:]
+    assert message in proc.stdout + proc.stderr
+    assert not cache.exists()
