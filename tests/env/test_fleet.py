@@ -250,3 +250,15 @@ def test_the_background_rule_reproduces_the_plain_day(make_fleet) -> None:
         if r.vehicle in fleet and r.start_time is not None and r.vehicle not in plain:
             plain[r.vehicle] = r.start_time - depart[r.vehicle]
     assert plain == fleet
+
+
+def test_the_fleet_plays_its_days_outages(make_fleet):
+    """``perturbations`` reaches the fleet's world like the single environment's: each day its own
+    outages, in force in the controller once an episode of that day began."""
+    fleet = make_fleet(
+        demand_seeds=(3, 4), perturbations={"outages": {"per_day": 20, "start_window": [0, 3000]}}
+    )
+    days = fleet.world.days
+    assert days[0].outages and days[0].outages != days[1].outages
+    fleet.reset(seed=0, options={"day": 1})
+    assert fleet.world.simulation.controller.outages == days[1].outages
