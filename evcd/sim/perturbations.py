@@ -135,10 +135,6 @@ class Perturbations:
             kept.append(outage)
         return check_outages(kept, stations)
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain values (a day's cache key holds them)."""
-        return {"outages": None if self.outages is None else dataclasses.asdict(self.outages)}
-
 
 def _pair(name: str, value: Any) -> tuple[float, float]:
     try:
