@@ -19,6 +19,7 @@ algorithm's in ``conf/sb3/``. Bad settings stop the run with exit code 2 before 
 
 from __future__ import annotations
 
+import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -183,16 +184,8 @@ def train(cfg: DictConfig) -> float:
 def record_training(path: Path, training: dict[str, Any]) -> None:
     """Put SB3's training (``training``) into the run's ``results.json`` (rewritten atomically): the
     evaluation wrote the counters of evcd's trainer, which did not train this policy."""
-    import json
-
     data = json.loads(path.read_text())
-    data["training"] = {
-        **data.get("training", {}),
-        **training,
-        "episodes": training["episodes"],
-        "episodes_done": training["episodes"],
-        "wall_s": training["wall_s"],
-    }
+    data["training"] = {**data.get("training", {}), **training, "episodes_done": training["episodes"]}
     atomic_write_json(path, data)
 
 
