@@ -35,13 +35,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 from evcd.scenario.stations_file import Station
 from evcd.sim.charge_record import ChargeRecord, Outcome
 from evcd.sim.driver import SUMO_ERRORS
 from evcd.sim.outages import Outage, check_outages, points_in_service
+from evcd.sim.visits import StationState, Visit
 
 log = logging.getLogger(__name__)
 
@@ -62,28 +62,6 @@ _SOC_TOL = 1e-9
 _PROBE_S = 10.0  # first read after a vehicle starts charging (no rate known yet)
 _AHEAD = 0.8  # read again after this fraction of the predicted remaining time
 _POLL_EVERY_STEP_S = 5.0
-
-
-@dataclass
-class _Visit:
-    """Live bookkeeping of a vehicle at a station."""
-
-    record: int  # index into ChargingController._records
-    capacity: float  # Wh
-    rate: str  # its maximumChargeRate as SUMO reported it on arrival, restored when it charges
-    zeroed: bool = False  # its maximumChargeRate is currently 0 (held)
-    read_time: float = 0.0  # when its charge was last read (while charging) ...
-    read_soc: float = 0.0  # ... and what it was
-    next_read: float = 0.0  # do not read its charge before this time
-
-
-@dataclass
-class _StationState:
-    station: Station
-    queue: list[str] = field(default_factory=list)  # waiting, FIFO order
-    charging: list[str] = field(default_factory=list)  # holding a point, in start order
-    lot: set[str] = field(default_factory=set)  # every vehicle parked in the car park that we know
-    leaving: set[str] = field(default_factory=set)  # in ``lot``, parking over, not yet driven out
 
 
 class ChargingController:
@@ -132,8 +110,8 @@ class ChargingController:
         self._out = {st.id: tuple(o for o in self.outages if o.station == st.id) for st in self.stations}
 
     def _reset(self) -> None:
-        self._st = {st.id: _StationState(st) for st in self.stations}
-        self._visits: dict[str, _Visit] = {}
+        self._st = {st.id: StationState(st) for st in self.stations}
+        self._visits: dict[str, Visit] = {}
         self._where: dict[str, str] = {}  # vehicle -> station, for every vehicle in a known lot
         self._records: list[ChargeRecord] = []
         self._joined: list[str] = []
@@ -205,12 +183,12 @@ class ChargingController:
         hold = vid in self._hold or hold_txt.strip().lower() in _TRUE
         soc = level / capacity
         self._records.append(ChargeRecord(vid, sid, time, soc, target, hold))
-        self._visits[vid] = _Visit(len(self._records) - 1, capacity, rate)
+        self._visits[vid] = Visit(len(self._records) - 1, capacity, rate)
         st.queue.append(vid)
         self._joined.append(vid)
         log.debug("t=%s %s joins %s (soc %.3f, queue %d)", time, vid, sid, soc, len(st.queue))
 
-    def _reconcile(self, api: Any, st: _StationState, time: float) -> None:
+    def _reconcile(self, api: Any, st: StationState, time: float) -> None:
         """Catch vehicles that left the car park unannounced, and adopt unknown parked ones."""
         lot_id = st.station.parking_area
         if api.parkingarea.getVehicleCount(lot_id) == len(st.lot):
@@ -230,7 +208,7 @@ class ChargingController:
                 log.info("t=%s adopting %s, already parked at station %s", time, vid, st.station.id)
                 self._join(api, vid, st.station.id, time)
 
-    def _release_charged(self, api: Any, st: _StationState, time: float) -> None:
+    def _release_charged(self, api: Any, st: StationState, time: float) -> None:
         for vid in list(st.charging):
             visit = self._visits[vid]
             rec = self._records[visit.record]
@@ -251,7 +229,7 @@ class ChargingController:
                 self._schedule_read(visit, time, soc, rec.target_soc)
 
     @staticmethod
-    def _schedule_read(visit: _Visit, time: float, soc: float, target: float) -> None:
+    def _schedule_read(visit: Visit, time: float, soc: float, target: float) -> None:
         rate = (soc - visit.read_soc) / (time - visit.read_time) if time > visit.read_time else 0.0
         if rate <= 0:  # not charging (yet): look again later
             visit.next_read = time + _PROBE_S
@@ -260,7 +238,7 @@ class ChargingController:
             visit.next_read = time if remaining <= _POLL_EVERY_STEP_S else time + _AHEAD * remaining
         visit.read_time, visit.read_soc = time, soc
 
-    def _interrupt(self, api: Any, st: _StationState, points: int, time: float) -> None:
+    def _interrupt(self, api: Any, st: StationState, points: int, time: float) -> None:
         """Points failed: the vehicles that started last stop and go back to the queue's head."""
         while len(st.charging) > points:
             vid = st.charging.pop()
@@ -274,7 +252,7 @@ class ChargingController:
             log.debug("t=%s %s's point at %s is out of service: back to the queue's head", time, vid,
                       st.station.id)  # fmt: skip
 
-    def _fill_points(self, api: Any, st: _StationState, points: int, time: float) -> None:
+    def _fill_points(self, api: Any, st: StationState, points: int, time: float) -> None:
         while st.queue and len(st.charging) < points:
             vid = st.queue.pop(0)
             visit = self._visits[vid]
@@ -329,7 +307,7 @@ class ChargingController:
         log.debug("t=%s %s leaves %s: %s", time, vid, rec.station, outcome)
 
     @staticmethod
-    def _soc(api: Any, vid: str, visit: _Visit) -> float | None:
+    def _soc(api: Any, vid: str, visit: Visit) -> float | None:
         try:
             return float(api.vehicle.getParameter(vid, _LEVEL)) / visit.capacity
         except SUMO_ERRORS:
@@ -463,7 +441,7 @@ class ChargingController:
         self.default_target_soc = float(state["default_target_soc"])
         self._hold = set(state["hold"])
         self._records = [ChargeRecord.from_dict(r) for r in state["records"]]
-        self._visits = {vid: _Visit(**v) for vid, v in state["visits"].items()}
+        self._visits = {vid: Visit(**v) for vid, v in state["visits"].items()}
         for sid, data in state["stations"].items():
             st = self._st[sid]
             st.queue, st.charging = list(data["queue"]), list(data["charging"])

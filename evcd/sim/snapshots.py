@@ -1,10 +1,10 @@
 """Day snapshots: simulate a background day once, start every episode from a saved state.
 
-A *day* is everything that shapes the background traffic of one simulated day: the scenario files,
-the charging points, the demand (config and seed, or a fixed route file), SUMO's step length and
-teleport threshold, the versions of SUMO, numpy (which draws the demand) and sumolib (which reads the
-network), and the evcd code that generates and drives the day. Its
-:class:`DaySpec` hashes all of that into a key; :class:`DayCache` keeps, in a folder named by the key,
+A *day* is everything that shapes the background traffic of one simulated day: the scenario files, the
+charging points, the demand (config and seed, or a fixed route file), SUMO's step length and teleport
+threshold, the versions of SUMO, numpy (which draws the demand) and sumolib (which reads the network), and
+the evcd code that generates and drives the day. Its :class:`DaySpec` hashes all of that into a key;
+:class:`DayCache` keeps, in a folder named by the key,
 
     routes.rou.xml.gz            the day's demand (generated once)
     state_<t>.xml.gz             SUMO state at time t (:meth:`SumoDriver.save_state`)
@@ -12,26 +12,25 @@ network), and the evcd code that generates and drives the day. Its
     manifest.json                files and their SHA-256, written last and atomically
     .lock                        fcntl lock: one process builds, the others wait and reuse
 
-A file that the manifest does not list, or whose checksum differs, is never used: the missing
-snapshots are rebuilt by simulating the day again from 00:00 (always from 00:00, so that every
-snapshot is a state of the uninterrupted day, as in the paper protocol). Snapshots are only saved
-for the times an episode can start from (see :func:`snapshot_times`).
+A file that the manifest does not list, or whose checksum differs, is never used: the missing snapshots are
+rebuilt by simulating the day again from 00:00 (always from 00:00, so that every snapshot is a state of the
+uninterrupted day, as in the paper protocol). Snapshots are only saved for the times an episode can start
+from (see :func:`snapshot_times`).
 
 The cache lives in ``$EVCD_CACHE``, else ``$XDG_CACHE_HOME/evcd``, else ``~/.cache/evcd``
 (:func:`default_cache_dir`); the folder is safe to delete.
 
-SUMO 1.28's loadState and how evcd copes (tested in ``tests/sim/test_snapshots.py`` and
-``tests/env``):
+SUMO 1.28's loadState and how evcd copes (tested in ``tests/sim/test_snapshots.py`` and ``tests/env``):
 
 - parked vehicles must be removed before a load (segfault otherwise): :meth:`SumoDriver.load_state`;
-- random number generators are not restored: the vehicle types drive with ``sigma = 0`` and the
-  demand writes per-vehicle speed factors, so nothing random is drawn inside SUMO;
-- vehicles departing after the snapshot come from the route file, which SUMO re-reads after a load
-  but without the vehicles it already took from a *later* snapshot: the environment restarts SUMO
-  before going back in time (:mod:`evcd.env.simulation`);
+- random number generators are not restored: the vehicle types drive with ``sigma = 0`` and the demand
+  writes per-vehicle speed factors, so nothing random is drawn inside SUMO;
+- vehicles departing after the snapshot come from the route file, which SUMO re-reads after a load but
+  without the vehicles it already took from a *later* snapshot: the environment restarts SUMO before going
+  back in time (:mod:`evcd.env.simulation`);
 - the charging queues live in Python: each snapshot carries the controller's ``state_dict()``;
-- the state is not restored bit for bit (routing weights, some car-park bookkeeping), so a run
-  continued from a snapshot may drift from the uninterrupted day by a step here and there:
+- the state is not restored bit for bit (routing weights, some car-park bookkeeping), so a run continued
+  from a snapshot may drift from the uninterrupted day by a step here and there:
   :mod:`evcd.bench.equivalence` measures the effect on travel times.
 """
 
@@ -63,6 +62,7 @@ from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SumoDriver
 from evcd.sim.outages import Outage, check_outages
 from evcd.utils.atomic import atomic_write_text
+from evcd.utils.digest import file_sha256
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +70,6 @@ CACHE_ENV = "EVCD_CACHE"
 FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
 ROUTES = "routes.rou.xml.gz"
-_CHUNK = 1 << 20
 _ENTRY_FIELDS = {"state", "state_sha256", "controller", "controller_sha256"}
 _told = [False]  # whether the one-time explanation of a day build was logged in this process
 # a progress bar over simulated time (of day) with the wall time left
@@ -79,8 +78,8 @@ _BAR = "{desc}: {percentage:3.0f}% of {total:.0f} sim s [{elapsed}<{remaining}]"
 # (numpy draws the demand, sumolib reads the network) that shape a cached day: a change invalidates it
 _CODE = ("scenario/demand.py", "scenario/routing.py", "scenario/scenario.py", "scenario/stations_file.py",
          "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/driver.py", "sim/outages.py",
-         "sim/snapshots.py",
-         "utils/atomic.py", "utils/sumo_tools.py", "utils/xml_files.py")  # fmt: skip
+         "sim/snapshots.py", "sim/visits.py", "utils/atomic.py", "utils/digest.py", "utils/sumo_tools.py",
+         "utils/xml_files.py")  # fmt: skip
 _PACKAGES = ("numpy", "sumolib")
 
 
@@ -90,15 +89,6 @@ def default_cache_dir() -> Path:
         return Path(os.environ[CACHE_ENV]).expanduser()
     xdg = os.environ.get("XDG_CACHE_HOME")
     return (Path(xdg).expanduser() if xdg else Path.home() / ".cache") / "evcd"
-
-
-def file_sha256(path: str | Path) -> str:
-    """Hex SHA-256 of a file's content."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(_CHUNK):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def snapshot_times(window: tuple[float, float], every: float) -> list[float]:
@@ -135,8 +125,8 @@ class DaySpec:
         route_file: a fixed SUMO route file used as the day's demand instead of generating one.
         step_length: SUMO step (s).
         time_to_teleport: SUMO's jam teleport threshold (s).
-        outages: the day's charger outages (:mod:`evcd.sim.perturbations` draws them from its
-            seed); part of the key only when there are some, so a calm day's key has no trace of them.
+        outages: the day's charger outages (drawn from its seed: :mod:`evcd.sim.perturbations`), in
+            the key only when there are some.
     """
 
     scenario: Scenario
