@@ -9,6 +9,7 @@
     python scripts/bench.py --suite fleet --episodes 3   # a fleet episode vs its day alone (400 EVs, peak)
     python scripts/bench.py --suite determinism [train.py overrides ...]   # same seed, same result?
     python scripts/bench.py --suite vector --num-envs 16 --steps 200   # the sweep vector env vs single
+    python scripts/bench.py --suite perturbed --episodes 2   # a day built calm vs perturbed (mixed, peak)
 
 ``--suite determinism`` trains the same short run twice (the README job cut to 200 training and 20
 evaluation episodes, on ``--scenario`` with ``--evs``; train.py overrides given after the options
@@ -74,15 +75,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
     p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet", "determinism",
-                                       "vector"),
+                                       "vector", "perturbed"),
                    default="env",
                    help="env (default): episodes, SUMO, replay; replay: the replay buffer alone; "
                         "throughput: the batched engine's speed; engines: batched vs single; "
                         "fleet: a fleet episode against its day alone; determinism: the same "
                         "training twice in fresh processes, compared; vector: the sweep vector "
-                        "environment against the single one, in the README job's world")  # fmt: skip
+                        "environment against the single one, in the README job's world; perturbed: "
+                        "the README job's day built calm and with every kind of perturbation")  # fmt: skip
     p.add_argument("--episodes", type=int, default=200,
-                   help="engines suite: episode seeds (default 200); fleet: episodes (~3)")  # fmt: skip
+                   help="engines suite: episode seeds (default 200); fleet: episodes (~3); "
+                        "perturbed: builds of each day (~2)")  # fmt: skip
     p.add_argument("--guided-share", type=float, default=1.0, help="fleet suite: guided share (default 1)")
     p.add_argument("--batch-sizes", type=int, nargs="+", default=[25],
                    help="engines suite: batch_episodes values to compare (default 25)")  # fmt: skip
@@ -132,6 +135,16 @@ def main(argv: list[str] | None = None) -> int:
         log.info("fleet_overhead %.2f (goal %s), fleet_transitions_per_second %.1f; wrote %s",
                  report["fleet_overhead"], report["goals"]["fleet_overhead"],
                  report["fleet_transitions_per_second"], args.out)  # fmt: skip
+        return 0
+    if args.suite == "perturbed":
+        from evcd.bench.perturbed import perturbed_build_cost
+
+        window = list(compose_experiment("peak", conf_dir=CONF).env.departure_window)
+        report = perturbed_build_cost({**env_kwargs, "departure_window": window}, repeats=args.episodes)
+        atomic_write_text(args.out, json.dumps(report, indent=1))
+        log.info("perturbed_build_ratio %.2f (calm %.1f s, perturbed %.1f s, events %s); wrote %s",
+                 report["perturbed_build_ratio"], report["calm_build_s"], report["perturbed_build_s"],
+                 report["events"], args.out)  # fmt: skip
         return 0
     if args.suite in ("throughput", "engines"):
         report = run_engine_suite(args, env_kwargs, replay)

@@ -3,10 +3,14 @@
     python scripts/inspect_scenario.py evs=400 seed=0
     python scripts/inspect_scenario.py -m evs=200,300,400          # one run per EV count
     python scripts/inspect_scenario.py scenario.path=/data/my_city begin=25200 end=36000
+    python scripts/inspect_scenario.py perturbations=mixed seed=3   # a day that is not calm
 
 Prints the network size, the station-to-station road distances, per hour the vehicles running, their
 mean speed and teleports, and per station the EVs served, the longest queue and the mean wait. Writes
-``report.json``, ``routes.rou.xml.gz`` and ``scenario_day.png`` into the Hydra run directory.
+``report.json``, ``routes.rou.xml.gz`` and ``scenario_day.png`` into the Hydra run directory; with
+perturbations, the day's events (drawn from its seed as in every environment) are played, listed in
+``report.json`` and drawn in ``day_events.png`` (where the incidents and road works are, when the
+rain, the incidents and the charger outages happen).
 """
 
 from __future__ import annotations
@@ -24,12 +28,14 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.experiments.worlds import demand_config
+from evcd.report.events_figure import plot_day_events
 from evcd.report.figures import plot_scenario_day
 from evcd.report.scenario import day_summary, format_table, station_distance_matrix, station_table
 from evcd.scenario.demand import DAY, generate_demand, write_demand
 from evcd.scenario.netstats import format_summary, network_summary
 from evcd.scenario.scenario import load_scenario
 from evcd.sim.day import simulate_day
+from evcd.sim.perturbations import Perturbations
 from evcd.utils.atomic import atomic_write_text
 
 log = logging.getLogger("inspect_scenario")
@@ -44,6 +50,10 @@ def inspect(cfg: DictConfig, out_dir: Path) -> dict:
     scenario = load_scenario(
         to_absolute_path(cfg.scenario.path), charging_points=cfg.scenario.charging_points
     )
+    block = OmegaConf.select(cfg, "perturbations")
+    perturbations = Perturbations.from_value(OmegaConf.to_container(block, resolve=True) if block else None)
+    outages = perturbations.outages_of(scenario.stations, int(cfg.seed))
+    roads = perturbations.roads_of(scenario.net, demand_cfg.hourly_profile, int(cfg.seed))
 
     net = network_summary(scenario.net_file)
     dist = station_distance_matrix(scenario)
@@ -63,7 +73,7 @@ def inspect(cfg: DictConfig, out_dir: Path) -> dict:
     day = simulate_day(
         scenario, routes, seed=int(cfg.seed), begin=float(cfg.begin), end=float(cfg.end),
         sample_every=float(cfg.sample_every), step_length=float(cfg.sumo.step_length),
-        time_to_teleport=float(cfg.sumo.time_to_teleport),
+        time_to_teleport=float(cfg.sumo.time_to_teleport), outages=outages, roads=roads,
     )  # fmt: skip
     hourly = day.traffic.hourly()
     stations = station_table(scenario, day)
@@ -79,8 +89,17 @@ def inspect(cfg: DictConfig, out_dir: Path) -> dict:
         out_dir / "scenario_day.png",
         title=f"{scenario.root.name}: {demand_cfg.cars_per_day} cars, {cfg.evs} EVs, seed {cfg.seed}",
     )  # fmt: skip
+    if not perturbations.calm:
+        events_png = plot_day_events(
+            scenario.net, scenario.stations, roads, outages, out_dir / "day_events.png",
+            title=f"{scenario.root.name}, seed {cfg.seed}: the day's perturbations",
+        )  # fmt: skip
+        counts = (len(roads.incidents), len(roads.rain), len(roads.roadworks), len(outages))
+        log.info("the day's events: %d incidents, %d rain spells, %d road works, %d charger outages (%s)",
+                 *counts, events_png)  # fmt: skip
     report = {
         "config": OmegaConf.to_container(cfg, resolve=True),
+        "events": {**roads.to_dict(), "outages": [asdict(o) for o in outages]},
         "network": net,
         "station_distance_m": dist.tolist(),
         "hourly": hourly,

@@ -123,10 +123,17 @@ class EnvConfig:
         except (FileNotFoundError, ValueError) as exc:
             raise ValueError(f"scenario={str(self.scenario)!r}: {exc}") from exc
         common = {"step_length": self.step_length, "time_to_teleport": self.time_to_teleport}
-        events = self.perturbations.outages_of  # the day's own, drawn from its seed
         if self.route_file is not None:
             return scenario, [DaySpec(scenario, route_file=Path(self.route_file).resolve(),
-                                      outages=events(scenario.stations, 0), **common)]  # fmt: skip
-        days = [DaySpec(scenario, self.demand_config, seed, outages=events(scenario.stations, seed), **common)
+                                      **self._events(scenario, 0), **common)]  # fmt: skip
+        days = [DaySpec(scenario, self.demand_config, seed, **self._events(scenario, seed), **common)
                 for seed in self.demand_seeds]  # fmt: skip
         return scenario, days
+
+    def _events(self, scenario: Scenario, seed: int) -> dict[str, Any]:
+        """The perturbations of the day of ``seed``, drawn from it (:mod:`evcd.sim.perturbations`)."""
+        p = self.perturbations
+        events: dict[str, Any] = {"outages": p.outages_of(scenario.stations, seed)}
+        if p.on_roads:
+            events["roads"] = p.roads_of(scenario.net, self.demand_config.hourly_profile, seed)
+        return events

@@ -47,6 +47,7 @@ from evcd.env.episode_rules import TIME_EPS
 from evcd.scenario.scenario import Scenario
 from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SUMO_ERRORS, SumoDriver
+from evcd.sim.road_player import RoadPlayer, attach
 from evcd.sim.snapshots import CacheError, DayCache, DaySpec, snapshot_times
 
 log = logging.getLogger(__name__)
@@ -93,6 +94,7 @@ class EpisodeSimulation:
         self._fresh_controller = self.controller.state_dict()
         self._driver: SumoDriver | None = None
         self._day: int | None = None  # day of the running driver
+        self._roads: RoadPlayer | None = None  # plays the running day's road events, if any
         self._ready: set[int] = set()  # days whose snapshots (or routes) this process verified
         self.restarts = 0  # SUMO starts (for the benchmark)
 
@@ -135,7 +137,7 @@ class EpisodeSimulation:
 
     def start_at(self, day: int, time: float) -> None:
         """Position the simulation of day ``day`` at ``time`` (s of day), controller included (with the
-        day's charger outages)."""
+        day's charger outages), roads too (its incidents, rain and road works)."""
         self.prepare(day)
         self.controller.use_outages(self.caches[day].spec.outages)
         if self.protocol == "paper":
@@ -152,7 +154,9 @@ class EpisodeSimulation:
             if not self.running or self._day != day or needs_restart(self.time, snap.time):
                 self._restart(day)
             try:
-                cache.load(snap, self.driver, self.controller)
+                t = cache.load(snap, self.driver, self.controller)
+                if self._roads is not None:  # the roads as they are at the snapshot, whatever it holds
+                    self._roads.sync(self.api, t)
                 return
             except CacheError as exc:
                 if attempt:
@@ -171,6 +175,7 @@ class EpisodeSimulation:
         driver = self.caches[day].make_driver(gui=self.gui)
         driver.start()
         driver.add_listener(self.controller.update)
+        self._roads = attach(driver, self.caches[day].spec.roads)
         self._driver, self._day = driver, day
         self.restarts += 1
 

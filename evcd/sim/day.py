@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time as wallclock
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -12,6 +13,9 @@ from tqdm.auto import tqdm
 from evcd.scenario.scenario import Scenario
 from evcd.sim.charging import ChargeRecord, ChargingController
 from evcd.sim.driver import SumoDriver
+from evcd.sim.outages import Outage
+from evcd.sim.road_events import RoadEvents
+from evcd.sim.road_player import attach
 from evcd.sim.traffic_stats import TrafficRecorder
 
 log = logging.getLogger(__name__)
@@ -38,6 +42,8 @@ def simulate_day(
     step_length: float = 1.0,
     time_to_teleport: float = 300.0,
     progress: bool = True,
+    outages: Sequence[Outage] = (),
+    roads: RoadEvents | None = None,
 ) -> DayResult:
     """Run ``[begin, end)`` of the day in ``route_file`` with the FIFO charging stations.
 
@@ -51,10 +57,12 @@ def simulate_day(
         step_length: SUMO step (s).
         time_to_teleport: SUMO's jam teleport threshold (s).
         progress: show a progress bar over simulated time.
+        outages: the day's charger outages (:mod:`evcd.sim.outages`).
+        roads: the day's incidents, rain and road works (:mod:`evcd.sim.road_events`), if any.
     """
     if sample_every <= 0:
         raise ValueError(f"sample_every={sample_every}: must be > 0")
-    controller = ChargingController(scenario.stations)
+    controller = ChargingController(scenario.stations, outages=outages)
     traffic = TrafficRecorder([s.id for s in scenario.stations])
     ids = traffic.station_ids
     driver = SumoDriver(
@@ -74,6 +82,7 @@ def simulate_day(
         tqdm(total=end - begin, unit="sim s", disable=not progress, desc="day", mininterval=2.0) as bar,
     ):
         driver.add_listener(controller.update)
+        attach(driver, roads or RoadEvents())
         driver.add_listener(traffic.on_step)
         now = driver.time
         while now < end - 1e-6:

@@ -37,10 +37,7 @@ SUMO 1.28's loadState and how evcd copes (tested in ``tests/sim/test_snapshots.p
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import fcntl
-import hashlib
-import importlib.metadata
 import json
 import logging
 import math
@@ -52,35 +49,25 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-import libsumo
 from tqdm.auto import tqdm
 
-import evcd
-from evcd.scenario.demand import DemandConfig, generate_demand, write_demand
-from evcd.scenario.scenario import Scenario
+from evcd.scenario.demand import generate_demand, write_demand
 from evcd.sim.charging import ChargingController
+from evcd.sim.day_spec import DaySpec
 from evcd.sim.driver import SumoDriver
-from evcd.sim.outages import Outage, check_outages
+from evcd.sim.road_player import attach
 from evcd.utils.atomic import atomic_write_text
 from evcd.utils.digest import file_sha256
 
 log = logging.getLogger(__name__)
 
 CACHE_ENV = "EVCD_CACHE"
-FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
 ROUTES = "routes.rou.xml.gz"
 _ENTRY_FIELDS = {"state", "state_sha256", "controller", "controller_sha256"}
 _told = [False]  # whether the one-time explanation of a day build was logged in this process
 # a progress bar over simulated time (of day) with the wall time left
 _BAR = "{desc}: {percentage:3.0f}% of {total:.0f} sim s [{elapsed}<{remaining}]"
-# the modules (each evcd module these import is listed: tests/sim/test_snapshots.py) and the packages
-# (numpy draws the demand, sumolib reads the network) that shape a cached day: a change invalidates it
-_CODE = ("scenario/demand.py", "scenario/routing.py", "scenario/scenario.py", "scenario/stations_file.py",
-         "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/driver.py", "sim/outages.py",
-         "sim/snapshots.py", "sim/visits.py", "utils/atomic.py", "utils/digest.py", "utils/sumo_tools.py",
-         "utils/xml_files.py")  # fmt: skip
-_PACKAGES = ("numpy", "sumolib")
 
 
 def default_cache_dir() -> Path:
@@ -103,79 +90,6 @@ def snapshot_times(window: tuple[float, float], every: float) -> list[float]:
     first = math.floor(lo / every)
     last = max(first, math.ceil(hi / every) - 1)
     return [float(k * every) for k in range(first, last + 1)]
-
-
-def _code_hash() -> str:
-    root = Path(evcd.__file__).parent
-    h = hashlib.sha256()
-    for rel in _CODE:
-        h.update(rel.encode())
-        h.update((root / rel).read_bytes())
-    return h.hexdigest()[:16]
-
-
-@dataclass(frozen=True)
-class DaySpec:
-    """Everything that determines one background day.
-
-    Attributes:
-        scenario: the scenario (its stations carry the charging points in force).
-        demand: the generated demand's config; ``None`` with ``route_file``.
-        demand_seed: the demand's seed; also SUMO's ``--seed`` for the day.
-        route_file: a fixed SUMO route file used as the day's demand instead of generating one.
-        step_length: SUMO step (s).
-        time_to_teleport: SUMO's jam teleport threshold (s).
-        outages: the day's charger outages (drawn from its seed: :mod:`evcd.sim.perturbations`), in
-            the key only when there are some.
-    """
-
-    scenario: Scenario
-    demand: DemandConfig | None = None
-    demand_seed: int = 0
-    route_file: Path | None = None
-    step_length: float = 1.0
-    time_to_teleport: float = 300.0
-    outages: tuple[Outage, ...] = ()
-
-    def __post_init__(self) -> None:
-        if (self.demand is None) == (self.route_file is None):
-            raise ValueError("a DaySpec needs exactly one of demand and route_file")
-        object.__setattr__(self, "outages", check_outages(self.outages, self.scenario.stations))
-
-    @property
-    def sumo_seed(self) -> int:
-        """SUMO's ``--seed`` for this day (the day, SUMO's draws included, is what is cached)."""
-        return int(self.demand_seed)
-
-    @cached_property
-    def fields(self) -> dict[str, Any]:
-        """The key's ingredients (JSON-serialisable); hashing the files takes a moment."""
-        sc = self.scenario
-        demand = None if self.demand is None else dataclasses.asdict(self.demand)
-        fields = {
-            "format": FORMAT_VERSION,
-            "sumo": libsumo.getVersion()[1],
-            "packages": {name: importlib.metadata.version(name) for name in _PACKAGES},
-            "code": _code_hash(),
-            "net": file_sha256(sc.net_file),
-            "stations": file_sha256(sc.stations_file),
-            "vtypes": file_sha256(sc.vtypes_file),
-            "charging_points": [st.points for st in sc.stations],
-            "demand": demand,
-            "demand_seed": int(self.demand_seed),
-            "route_file": None if self.route_file is None else file_sha256(self.route_file),
-            "step_length": float(self.step_length),
-            "time_to_teleport": float(self.time_to_teleport),
-        }
-        if self.outages:
-            fields["outages"] = [dataclasses.asdict(o) for o in self.outages]
-        return fields
-
-    @cached_property
-    def key(self) -> str:
-        """Hex digest naming the day's cache folder."""
-        blob = json.dumps(self.fields, sort_keys=True).encode()
-        return hashlib.sha256(blob).hexdigest()[:24]
 
 
 @dataclass(frozen=True)
@@ -418,6 +332,7 @@ class DayCache:
                  disable=not progress, bar_format=_BAR) as bar,
         ):  # fmt: skip
             driver.add_listener(controller.update)
+            attach(driver, self.spec.roads)  # the day's incidents, rain and road works, if any
             for t in missing:
                 driver.step(until=t)
                 bar.update(t - bar.n)

@@ -7,6 +7,7 @@ import subprocess
 from dataclasses import asdict
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from evcd.scenario.demand import DemandConfig
@@ -61,6 +62,38 @@ def test_inspect_a_morning_on_a_small_scenario(scenario_dir, tmp_path):
     assert "per station" in log and "station-to-station road distance" in log
 
 
+def test_inspect_a_perturbed_morning_plays_and_draws_its_events(scenario_dir, tmp_path):
+    """perturbations=mixed with every kind in the morning: the report lists the events drawn from the
+    day's seed (those an environment of that day plays), the hourly traffic is slower than the calm
+    day's, and day_events.png is written."""
+    common = (
+        f"scenario.path={scenario_dir}", "evs=120", "seed=3", "begin=25200", "end=32400",
+        "scenario.demand.cars_per_day=800", "scenario.demand.min_trip_m=500",
+    )  # fmt: skip
+    wet = (
+        "perturbations=mixed", "perturbations.rain.chance=1", "perturbations.rain.start_window=[25200,26000]",
+        "perturbations.rain.speed_factor=0.7", "perturbations.incidents.per_day=6",
+        "perturbations.incidents.start_window=[25200,32400]",
+        "perturbations.outages.start_window=[25200,32400]",
+    )  # fmt: skip
+    runs = {}
+    for name, extra in (("calm", ()), ("mixed", wet)):
+        out = tmp_path / name
+        proc = run_inspect(*common, *extra, f"hydra.run.dir={out}")
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs[name] = (out, json.loads((out / "report.json").read_text()))
+    out, report = runs["mixed"]
+    events = report["events"]
+    assert events["incidents"] and events["rain"] and events["roadworks"]
+    assert all(25200 <= e["start"] < 32400 for e in events["incidents"])
+    assert runs["calm"][1]["events"] == {"incidents": [], "rain": [], "roadworks": [], "outages": []}
+    speed = {k: np.mean([h["mean_speed_kmh"] for h in r[1]["hourly"]]) for k, r in runs.items()}
+    assert speed["mixed"] < 0.9 * speed["calm"]
+    png = (out / "day_events.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+    assert not (runs["calm"][0] / "day_events.png").exists()
+
+
 @pytest.mark.parametrize(
     "override,needle",
     [
@@ -68,6 +101,7 @@ def test_inspect_a_morning_on_a_small_scenario(scenario_dir, tmp_path):
         ("scenario.charging_points=0", "charging_points=0"),
         ("begin=90000", "begin=90000"),
         ("scenario.path=/no/such/folder", "/no/such/folder"),
+        ("+perturbations.rain={hours: [0, 30]}", "perturbations.rain.hours=[0, 30]"),
     ],
 )
 def test_bad_values_stop_before_sumo(scenario_dir, tmp_path, override, needle):

@@ -29,6 +29,16 @@ def test_outages_reach_every_split_and_the_fleet():
     assert fleet_kwargs(fleet)["perturbations"]["outages"]["minutes"] == [30.0, 180.0]
 
 
+def test_mixed_composes_every_kind_with_its_own_settings():
+    cfg = compose_config("train", "perturbations=mixed", "perturbations.rain.chance=1.0")
+    p = env_kwargs(cfg)["perturbations"]
+    assert sorted(p) == ["incidents", "outages", "rain", "roadworks"]
+    assert (
+        p["rain"]["chance"] == 1.0
+        and p["incidents"] == compose_config("train", "perturbations=incidents").perturbations.incidents
+    )
+
+
 def test_an_unknown_option_is_refused_by_hydra():
     with pytest.raises(ConfigCompositionException, match="perturbations"):
         compose_config("train", "perturbations=hail")
@@ -69,7 +79,10 @@ def test_a_perturbed_run_plays_its_days_outages(script_overrides, tmp_path):
     [
         ("perturbations.outages.per_day=-1", "perturbations.outages.per_day"),
         ("perturbations.outages.minutes=[100,10]", "perturbations.outages.minutes=[100, 10]"),
-        ("+perturbations.rain={factor: 0.8}", "perturbations.rain: not drawn yet"),
+        ("+perturbations.rain={factor: 0.8}", "perturbations.rain.factor: unknown"),
+        ("+perturbations.rain={speed_factor: 1.5}", "perturbations.rain.speed_factor"),
+        ("+perturbations.incidents={minutes: [0, 30]}", "perturbations.incidents.minutes=[0, 30]"),
+        ("+perturbations.roadworks={lanes_closed: -1}", "perturbations.roadworks.lanes_closed"),
     ],
 )
 def test_bad_perturbations_stop_the_run_before_sumo(override, message, script_overrides, tmp_path):

@@ -57,7 +57,7 @@ def test_calm_is_calm(small_scenario):
     ("value", "message"),
     [
         ({"hail": {}}, "unknown kind 'hail'; the kinds: " + ", ".join(KINDS)),
-        ({"rain": {"factor": 0.8}}, "perturbations.rain: not drawn yet"),
+        ({"rain": {"factor": 0.8}}, "perturbations.rain.factor: unknown"),
         ({"outages": {"per_day": -1}}, "perturbations.outages.per_day"),
         ({"outages": {"minutes": [200, 100]}}, "perturbations.outages.minutes=[200, 100]"),
         ({"outages": {"minutes": [0, 10]}}, "need 1 <= low"),

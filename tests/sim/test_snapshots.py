@@ -82,11 +82,11 @@ def test_key_changes_with_everything_that_changes_the_day(spec, small_scenario):
 
 
 def test_key_changes_with_the_packages_that_draw_and_read_the_day(spec, monkeypatch):
-    from evcd.sim import snapshots
+    from evcd.sim import day_spec
 
-    real, base = snapshots.importlib.metadata.version, spec.key
+    real, base = day_spec.importlib.metadata.version, spec.key
     for package in ("numpy", "sumolib"):
-        monkeypatch.setattr(snapshots.importlib.metadata, "version",
+        monkeypatch.setattr(day_spec.importlib.metadata, "version",
                             lambda name, p=package: "0.0.1" if name == p else real(name))  # fmt: skip
         assert DaySpec(spec.scenario, DEMAND, demand_seed=0).key != base, package
     monkeypatch.undo()
@@ -98,16 +98,16 @@ def test_the_code_key_lists_every_evcd_module_a_day_depends_on():
     one of them (e.g. how the stations file is read) cannot leave another day in the cache."""
     import ast
 
-    from evcd.sim import snapshots
+    from evcd.sim import day_spec
 
-    root = Path(snapshots.__file__).parents[1]
-    listed, todo = set(snapshots._CODE), list(snapshots._CODE)
+    root = Path(day_spec.__file__).parents[1]
+    listed, todo = set(day_spec._CODE), list(day_spec._CODE)
     while todo:
         tree = ast.parse((root / todo.pop()).read_text())
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("evcd."):
                 rel = node.module.removeprefix("evcd.").replace(".", "/") + ".py"
-                assert rel in listed, f"{rel} shapes a cached day but is not in snapshots._CODE"
+                assert rel in listed, f"{rel} shapes a cached day but is not in day_spec._CODE"
     assert "scenario/stations_file.py" in listed and "sim/charge_record.py" in listed
 
 
