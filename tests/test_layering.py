@@ -24,13 +24,14 @@ PACKAGE = Path(__file__).resolve().parents[1] / "evcd"
 
 #: Each folder's rank: a module may import evcd modules of a lower rank or of its own folder.
 RANKS = {
-    "utils": 0, "scenario": 1, "sim": 2, "env": 3, "agents": 4, "loops": 5, "report": 6, "bench": 6,
-    "experiments": 6, "cli": 7,
+    "utils": 0, "scenario": 1, "sim": 2, "forecast": 3, "env": 4, "agents": 5, "loops": 6, "report": 7,
+    "bench": 7, "experiments": 7, "cli": 8,
 }  # fmt: skip
 #: Third-party modules a layer must not import.
 FORBIDDEN_LIBRARIES = {
     "scenario": ("libsumo", "traci", "torch"),
     "sim": ("torch",),
+    "forecast": ("libsumo", "traci", "torch"),
     "env": ("torch",),
     "agents": ("libsumo", "traci"),
 }

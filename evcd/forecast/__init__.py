@@ -1,0 +1,35 @@
+"""Forecasts of the number of vehicles at each station at a future time (an EV's arrival there).
+
+- :class:`OccupancyTimeline` (:mod:`~evcd.forecast.timeline`): vehicles at each station over time,
+  from the controller's visit records, known up to the time they were read;
+- :class:`Forecaster` and its :class:`HistoryForecaster`, :class:`TrendForecaster` and
+  :class:`OracleForecaster` (:mod:`~evcd.forecast.forecasters`), made by name with
+  :func:`make_forecaster`;
+- :func:`forecast_errors` and :func:`format_mae_table` (:mod:`~evcd.forecast.errors`): a forecaster's
+  mean absolute error per station and hour on played days.
+"""
+
+from __future__ import annotations
+
+from evcd.forecast.errors import forecast_errors, format_mae_table
+from evcd.forecast.forecasters import (
+    FORECASTERS,
+    Forecaster,
+    HistoryForecaster,
+    OracleForecaster,
+    TrendForecaster,
+    make_forecaster,
+)
+from evcd.forecast.timeline import OccupancyTimeline
+
+__all__ = [
+    "FORECASTERS",
+    "Forecaster",
+    "HistoryForecaster",
+    "OccupancyTimeline",
+    "OracleForecaster",
+    "TrendForecaster",
+    "forecast_errors",
+    "format_mae_table",
+    "make_forecaster",
+]

@@ -1,0 +1,221 @@
+"""The forecasters (history, trend, oracle), make_forecaster and the error table, every value
+hand-computed on toy days of a few visits."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from evcd.forecast import (
+    Forecaster,
+    HistoryForecaster,
+    OccupancyTimeline,
+    OracleForecaster,
+    TrendForecaster,
+    forecast_errors,
+    format_mae_table,
+    make_forecaster,
+)
+
+
+def day(visits: list[tuple[str, float, float | None]], known_until: float, stations=("a", "b")):
+    """A timeline of ``(station, arrival, release)`` visits."""
+    records = [
+        {"station": s, "arrival_time": float(a), "release_time": None if r is None else float(r)}
+        for s, a, r in visits
+    ]
+    return OccupancyTimeline.from_records(records, stations, known_until)
+
+
+# ------------------------------------------------------------------------------------------ history
+#: Two training days sampled every 60 s over [0, 1200]; bins of 600 s: bin 0 holds 0..540 (10 samples
+#: a day), bin 1 600..1140 (10), bin 2 only 1200 (1).
+DAY1 = day([("a", 0, 600), ("b", 300, 900)], 1200.0)
+DAY2 = day([("a", 120, None), ("b", 600, 1200), ("b", 630, None)], 1200.0)
+# a: day 1 has 1 at the 10 samples of bin 0; day 2 has 1 from 120 (8 samples of bin 0, all later ones)
+#    bin 0: (10 + 8) / 20, bin 1: (0 + 10) / 20, bin 2: (0 + 1) / 2
+# b: day 1 has 1 at 300..540 (5 samples of bin 0) and 600..840 (5 of bin 1); day 2 has 1 at 600, 2 at
+#    660..1140 (9 samples), 1 at 1200 (the visit released at 1200 is gone)
+#    bin 0: 5 / 20, bin 1: (5 + 1 + 18) / 20, bin 2: (0 + 1) / 2
+MEANS = [[0.9, 0.25], [0.5, 1.2], [0.5, 0.5]]
+
+
+def test_the_history_forecast_is_the_mean_of_the_training_days_in_the_arrivals_bin():
+    history = HistoryForecaster(bin_s=600.0).fit([DAY1, DAY2])
+    assert history.bin_means == pytest.approx(np.array(MEANS))
+    today = day([("a", 0, None)], 0.0)  # its counts are not read
+    assert history.forecast(0.0, [300.0, 300.0], today) == pytest.approx([0.9, 0.25])
+    batch = history.forecast(0.0, [[600.0, 1199.0], [5000.0, 0.0]], today)
+    assert batch.dtype == np.float64 and batch.shape == (2, 2)
+    assert batch == pytest.approx(np.array([[0.5, 1.2], [0.5, 0.25]]))  # 5000: after the last bin
+
+
+def test_a_history_bin_without_samples_takes_the_nearest_one_the_earlier_on_a_tie():
+    # bins of 30 s, samples every 60 s: bins 0, 2, 4 hold the samples 0, 60, 120 (0, 1, 1 vehicles)
+    history = HistoryForecaster(bin_s=30.0).fit([day([("a", 60, None)], 120.0, stations=("a",))])
+    assert history.bin_means[:, 0].tolist() == [0.0, 0.0, 1.0, 1.0, 1.0]
+    today = day([], 0.0, stations=("a",))
+    assert history.forecast(0.0, [[45.0], [95.0]], today).tolist() == [[0.0], [1.0]]
+
+
+def test_a_history_forecaster_needs_training_days():
+    with pytest.raises(ValueError, match="needs training days"):
+        HistoryForecaster().fit([])
+    with pytest.raises(ValueError, match="needs training days"):
+        HistoryForecaster().forecast(0.0, [10.0, 10.0], DAY1)
+    with pytest.raises(ValueError, match="same stations"):
+        HistoryForecaster().fit([DAY1, day([], 1200.0, stations=("b", "a"))])
+    fitted = HistoryForecaster().fit([DAY1])
+    with pytest.raises(ValueError, match=r"today's stations \['b', 'a'\]"):
+        fitted.forecast(0.0, [10.0, 10.0], day([], 100.0, stations=("b", "a")))
+    with pytest.raises(ValueError, match="bin_s=0"):
+        HistoryForecaster(bin_s=0.0)
+
+
+# ------------------------------------------------------------------------------------------ trend
+#: a rises by one vehicle a minute (arrivals at 60, 120, ..., 900, none leave); b falls by one a
+#: minute from 10 at 0 (releases at 60, ..., 600). Known until 1000.
+RISING = [("a", 60.0 * k, None) for k in range(1, 16)]
+FALLING = [("b", 0.0, 60.0 * k) for k in range(1, 11)]
+TODAY = day(RISING + FALLING, 1000.0)
+
+
+def test_the_trend_extrapolates_the_line_through_the_last_window_and_clips_at_zero():
+    trend = TrendForecaster(window_s=600.0)
+    # samples 0, 60, ..., 600: a = t / 60, b = 10 - t / 60
+    assert trend.forecast(600.0, [600.0, 600.0], TODAY) == pytest.approx([10.0, 0.0], abs=1e-12)
+    assert trend.forecast(600.0, [900.0, 1140.0], TODAY) == pytest.approx([15.0, 0.0], abs=1e-12)
+    # b's line is at 10 - 630 / 60 = -0.5 at 630: clipped to 0; a's at 10.5
+    out = trend.forecast(600.0, [[630.0, 630.0], [1200.0, 600.0]], TODAY)
+    assert out == pytest.approx(np.array([[10.5, 0.0], [20.0, 0.0]]), abs=1e-12)
+    # b at 300 samples over [0, 300]: 10, 9, ..., 5 -> at 420: 3
+    assert trend.forecast(300.0, [300.0, 420.0], TODAY) == pytest.approx([5.0, 3.0], abs=1e-12)
+
+
+def test_the_trend_reads_today_only_up_to_now():
+    trend = TrendForecaster()
+    full = trend.forecast(600.0, [900.0, 900.0], TODAY)
+    assert trend.forecast(600.0, [900.0, 900.0], TODAY.truncated(600.0)).tolist() == full.tolist()
+
+
+def test_the_trends_window_is_clipped_at_midnight_and_too_few_samples_give_the_occupancy_now():
+    # now = 120: samples at 0, 60, 120 only (a: 0, 1, 2; b: 10, 9, 8) -> at 300: a 5, b 5
+    assert TrendForecaster(window_s=900.0).forecast(120.0, [300.0, 300.0], TODAY) == pytest.approx(
+        [5.0, 5.0], abs=1e-12
+    )
+    # one sample: the occupancy now (a: 10, b: 0 at 600; a: 0, b: 10 at 30)
+    assert TrendForecaster(window_s=30.0).forecast(600.0, [[900.0, 900.0]], TODAY).tolist() == [[10.0, 0.0]]
+    assert TrendForecaster(window_s=900.0).forecast(30.0, [900.0, 900.0], TODAY).tolist() == [0.0, 10.0]
+
+
+# ------------------------------------------------------------------------------------------ oracle
+def test_the_oracle_forecasts_the_days_own_future_exactly():
+    oracle = OracleForecaster(TODAY)
+    arrival = np.array([[300.0, 300.0], [930.0, 590.0], [5000.0, 5000.0]])
+    # a: 5 at 300, 15 from 900; b: 5 at 300, 1 at 590, 0 from 600; 5000: the value at 1000
+    out = oracle.forecast(200.0, arrival, TODAY.truncated(200.0))
+    assert out.dtype == np.float64 and out.tolist() == [[5.0, 5.0], [15.0, 1.0], [15.0, 0.0]]
+
+
+# ------------------------------------------------------------------------------------------ the interface
+def test_bad_forecast_input_is_refused():
+    trend = TrendForecaster()
+    with pytest.raises(ValueError, match=r"arrival time 500 is before now=600: arrival times must be >= now"):
+        trend.forecast(600.0, [700.0, 500.0], TODAY)
+    with pytest.raises(ValueError, match=r"shape \(3,\): must be \(m,\) or \(k, m\) with m=2"):
+        trend.forecast(600.0, [700.0, 700.0, 700.0], TODAY)
+    with pytest.raises(ValueError, match="before now=600"):
+        trend.forecast(600.0, [700.0, 700.0], TODAY.truncated(500.0))
+    with pytest.raises(ValueError, match="window_s=-1"):
+        TrendForecaster(window_s=-1.0)
+
+
+def test_make_forecaster_makes_each_by_name_and_refuses_what_it_cannot():
+    history = make_forecaster("history", [DAY1, DAY2], bin_s=600.0)
+    assert isinstance(history, HistoryForecaster) and history.bin_means == pytest.approx(np.array(MEANS))
+    trend = make_forecaster("trend", window_s=300.0)
+    assert isinstance(trend, TrendForecaster) and trend.window_s == 300.0
+    oracle = make_forecaster("oracle", day=TODAY)
+    assert isinstance(oracle, OracleForecaster) and oracle.day is TODAY
+    with pytest.raises(ValueError, match="forecaster='arima': must be one of history, trend, oracle"):
+        make_forecaster("arima")
+    with pytest.raises(ValueError, match=r"needs training days .* none were given"):
+        make_forecaster("history")
+    with pytest.raises(ValueError, match="needs day="):
+        make_forecaster("oracle")
+    with pytest.raises(ValueError, match=r"settings \['bins'\] for the trend forecaster: it takes"):
+        make_forecaster("trend", bins=3)
+
+
+# ------------------------------------------------------------------------------------------ errors
+#: The played day, known until 3720: a gets a vehicle at 3610 (0 at 3600, 1 at 3660 and 3720); b has
+#: one until 3650 (1 at 3600, 0 at 3660 and 3720).
+PLAYED = day([("a", 3610, None), ("b", 0, 3650)], 3720.0)
+#: Training: a has 2 all day; b has 1 until 5400: bin 1 (3600..7140) has 30 samples of 1 in 60 -> 0.5.
+TRAINING = day([("a", 0, None), ("a", 0, None), ("b", 0, 5400)], 7200.0)
+WINDOW = (3540.0, 3720.0)  # decisions at 3540 (hour 0), 3600 and 3660 (hour 1)
+HORIZONS = (60.0, 120.0)  # arrivals 3600, 3660 | 3660, 3720 | 3720 (3780 is after known_until)
+
+
+def test_the_oracle_has_no_error_and_the_history_its_hand_computed_one():
+    oracle = forecast_errors(OracleForecaster(PLAYED), [PLAYED], WINDOW, HORIZONS, every_s=60.0)
+    assert oracle == [
+        {"station": "a", "hour": 0, "mae": 0.0, "n": 2},
+        {"station": "a", "hour": 1, "mae": 0.0, "n": 3},
+        {"station": "b", "hour": 0, "mae": 0.0, "n": 2},
+        {"station": "b", "hour": 1, "mae": 0.0, "n": 3},
+    ]
+    history = make_forecaster("history", [TRAINING], bin_s=3600.0)  # forecasts a: 2, b: 0.5 after 3600
+    rows = forecast_errors(history, [PLAYED, PLAYED], WINDOW, HORIZONS, every_s=60.0)
+    # a, hour 0: |2 - 0| and |2 - 1| -> 1.5; hour 1: |2 - 1| three times -> 1.0
+    # b, hour 0: |0.5 - 1| and |0.5 - 0| -> 0.5; hour 1: |0.5 - 0| three times -> 0.5
+    assert rows == [
+        {"station": "a", "hour": 0, "mae": 1.5, "n": 4},
+        {"station": "a", "hour": 1, "mae": 1.0, "n": 6},
+        {"station": "b", "hour": 0, "mae": 0.5, "n": 4},
+        {"station": "b", "hour": 1, "mae": 0.5, "n": 6},
+    ]
+    assert format_mae_table(rows) == "station    00    01\na        1.50  1.00\nb        0.50  0.50"
+
+
+class Peeking(Forecaster):
+    """Notes how far today is known at each forecast."""
+
+    name: ClassVar[str] = "peeking"
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[float, float]] = []
+
+    def _predict(self, now, arrival, today):
+        self.seen.append((now, today.known_until))
+        return np.zeros_like(arrival)
+
+
+def test_the_forecaster_sees_the_day_only_up_to_each_decision_time():
+    peeking = Peeking()
+    forecast_errors(peeking, [PLAYED], WINDOW, HORIZONS)
+    assert peeking.seen == [(3540.0, 3540.0), (3600.0, 3600.0), (3660.0, 3660.0)]
+
+
+def test_the_table_marks_missing_cells_and_bad_error_input_is_refused():
+    rows = [
+        {"station": "b", "hour": 7, "mae": 0.25, "n": 1},
+        {"station": "a", "hour": 12, "mae": 2.0, "n": 1},
+    ]
+    assert format_mae_table(rows) == "station    07    12\na           -  2.00\nb        0.25     -"
+    assert format_mae_table([]) == "no forecast errors (no rows)"
+    oracle = OracleForecaster(PLAYED)
+    with pytest.raises(ValueError, match="at least one day"):
+        forecast_errors(oracle, [], WINDOW)
+    with pytest.raises(
+        ValueError, match=r"window=\(3720.0, 3540.0\): must be \(start, end\) with start < end"
+    ):
+        forecast_errors(oracle, [PLAYED], (3720.0, 3540.0))
+    with pytest.raises(ValueError, match="every_s=0"):
+        forecast_errors(oracle, [PLAYED], WINDOW, every_s=0.0)
+    with pytest.raises(ValueError, match=r"horizons_s\[1\]=-60"):
+        forecast_errors(oracle, [PLAYED], WINDOW, (60.0, -60.0))
+    # no (t, h) fits in the day: no rows
+    assert forecast_errors(oracle, [PLAYED], WINDOW, (600.0,)) == []
