@@ -43,12 +43,14 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 
+from evcd.env.observation import BASE_LAYOUTS, check_layout
 from evcd.env.transition import Transition
 from evcd.utils.validation import check_int
 
 #: The observation layouts, by number of length-``m`` blocks: the single environment's ``[D, N, Z]``
 #: (:mod:`evcd.env.observation`) and the fleet's ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`; ``H``: the
-#: other guided EVs heading to each station).
+#: other guided EVs heading to each station). The observation options (``EnvConfig.observe``) add
+#: blocks after these: an agent reads such a vector by its layout letters (:attr:`Agent.layout`).
 OBSERVATION_LAYOUTS: dict[int, str] = {3: "[D, N, Z]", 4: "[D, N, Z, H]"}
 
 
@@ -59,25 +61,47 @@ def check_blocks(blocks: Any, name: str = "blocks") -> int:
     return int(blocks)
 
 
-def split_observation(obs: np.ndarray, n_stations: int, blocks: int = 3) -> tuple[np.ndarray, ...]:
-    """The ``blocks`` length-``n_stations`` parts of an observation vector (or, for a batch
-    ``(k, blocks * m)``, of each row: arrays ``(k, m)``): ``(D, N, Z)`` for 3 blocks (the single
-    environment), ``(D, N, Z, H)`` for 4 (the fleet).
+def layout_option(obs_blocks: Any) -> str:
+    """A learner's ``obs_blocks`` option as a layout: 3 (``"DNZ"``), 4 (``"DNZH"``) or block letters
+    with the observation options' (e.g. ``"DNZP"``).
 
     Raises:
-        ValueError: ``obs`` is not ``(blocks * n_stations,)`` or ``(k, blocks * n_stations)``, or
-            ``blocks`` is not 3 or 4.
+        ValueError: naming the value and what is allowed.
     """
-    blocks = check_blocks(blocks)
-    vec = np.asarray(obs)
-    size = blocks * n_stations
-    if vec.ndim not in (1, 2) or vec.shape[-1] != size:
+    try:
+        return check_layout(obs_blocks)
+    except ValueError:
         raise ValueError(
-            f"observation of shape {vec.shape}: expected ({size},) = {OBSERVATION_LAYOUTS[blocks]} for "
-            f"{n_stations} stations (or a batch of them)"
+            f"obs_blocks={obs_blocks!r}: must be 3 ([D, N, Z]), 4 ([D, N, Z, H]) or a layout's letters "
+            "(e.g. 'DNZP', 'DNZHPT': evcd.env.observation.check_layout)"
+        ) from None
+
+
+def split_observation(obs: np.ndarray, n_stations: int, blocks: int | str = 3) -> tuple[np.ndarray, ...]:
+    """The length-``n_stations`` parts of an observation vector (or, for a batch ``(k, size)``, of
+    each row: arrays ``(k, m)``), in the order of ``blocks``: 3 (``D, N, Z``, the single
+    environment), 4 (``D, N, Z, H``, the fleet) or a layout's letters (e.g. ``"DNZP"``,
+    :func:`evcd.env.observation.check_layout`).
+
+    Raises:
+        ValueError: ``obs`` is not ``(size,)`` or ``(k, size)`` for the layout, or the layout is not one.
+    """
+    try:
+        layout = check_layout(blocks)
+    except ValueError:
+        raise ValueError(
+            f"blocks={blocks!r}: must be 3 ([D, N, Z]), 4 ([D, N, Z, H]) or a layout's letters (e.g. 'DNZP')"
+        ) from None
+    vec = np.asarray(obs)
+    size = len(layout) * n_stations
+    if vec.ndim not in (1, 2) or vec.shape[-1] != size:
+        named = OBSERVATION_LAYOUTS.get(len(layout)) if layout in BASE_LAYOUTS else f"[{', '.join(layout)}]"
+        raise ValueError(
+            f"observation of shape {vec.shape}: expected ({size},) = {named} for {n_stations} stations "
+            "(or a batch of them)"
         )
     m = n_stations
-    return tuple(vec[..., b * m : (b + 1) * m] for b in range(blocks))
+    return tuple(vec[..., b * m : (b + 1) * m] for b in range(len(layout)))
 
 
 def observation_blocks(obs: np.ndarray, n_stations: int, accepted: Sequence[int] = (3, 4)) -> int:
@@ -113,16 +137,19 @@ def observation_units(env: Any) -> dict[str, Any]:
     return {"points": [st.points for st in base.stations], "normalized": bool(base.config.normalize_obs)}
 
 
-def observation_layout(env: Any) -> int:
-    """The number of blocks of ``env``'s observations: 3 (``[D, N, Z]``), or 4 for the fleet's
-    ``[D, N, Z, H]`` (a PettingZoo env: ``observation_space(agent)``); 3 for an object without an
-    observation space."""
+def observation_layout(env: Any) -> str:
+    """The layout of ``env``'s observations (block letters: ``"DNZ"``, the fleet's ``"DNZH"``, with the
+    observation options' blocks after them): the environment's ``layout``, else read off the
+    observation space's size (3 or 4 blocks; ``"DNZ"`` for an object without a space)."""
+    layout = getattr(getattr(env, "unwrapped", env), "layout", None)
+    if isinstance(layout, str):
+        return check_layout(layout)
     space = getattr(env, "observation_space", None)
     if space is None:
-        return 3
+        return "DNZ"
     if callable(space):  # PettingZoo: one space per agent, the same for all
         space = space(next(iter(env.possible_agents), None))
-    return int(space.shape[0]) // len(env.unwrapped.stations)
+    return check_layout(int(space.shape[0]) // len(env.unwrapped.stations))
 
 
 @dataclass
@@ -169,6 +196,9 @@ class Agent(ABC):
         if not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng={rng!r}: must be a numpy.random.Generator (derive it from the run seed)")
         self.rng = rng
+        #: the layout of the observations it decides on (block letters, e.g. ``"DNZP"``); set from the
+        #: environment by :meth:`from_env`; ``None``: read off each observation's size (3 or 4 blocks)
+        self.layout: str | None = None
         self.episode = self.new_episode(rng)  # the episode act() decides for
 
     # ------------------------------------------------------------------ construction
@@ -199,16 +229,33 @@ class Agent(ABC):
         space = env.action_space
         if callable(space):  # PettingZoo: one space per agent
             space = space(next(iter(env.possible_agents), None))
-        return cls(int(space.n), rng, **{**cls.env_kwargs(env), **kwargs})
+        agent = cls(int(space.n), rng, **{**cls.env_kwargs(env), **kwargs})
+        agent.layout = observation_layout(env)
+        return agent
 
     # ------------------------------------------------------------------ acting
     def blocks_of(self, obs: np.ndarray) -> int:
-        """The number of blocks of ``obs`` (one observation or a batch), one of :attr:`obs_blocks`.
+        """The base layout of ``obs`` (one observation or a batch): 3 (``[D, N, Z]``) or 4 (``[D, N, Z,
+        H]``), one of :attr:`obs_blocks`; with :attr:`layout` set, ``obs`` must have its size.
 
         Raises:
             ValueError: ``obs`` has none of the accepted shapes (the message names them).
         """
-        return observation_blocks(obs, self.n_stations, self.obs_blocks)
+        if self.layout is None:
+            return observation_blocks(obs, self.n_stations, self.obs_blocks)
+        self.parts(obs)  # its size
+        blocks = 4 if "H" in self.layout else 3
+        if blocks not in self.obs_blocks:
+            raise ValueError(
+                f"observations of layout {self.layout!r}: {self.name} reads {self.obs_blocks} blocks"
+            )
+        return blocks
+
+    def parts(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """The blocks of ``obs`` (one observation or a batch) by letter, in the environment's units
+        (:attr:`layout`, or the base layout its size says)."""
+        layout = self.layout or BASE_LAYOUTS[observation_blocks(obs, self.n_stations, self.obs_blocks) - 3]
+        return dict(zip(layout, split_observation(obs, self.n_stations, layout), strict=True))
 
     def new_episode(self, rng: np.random.Generator) -> EpisodeState:
         """The state of a new episode drawing from ``rng`` (the episode's own generator, so that an

@@ -42,7 +42,7 @@ from torch.nn import functional as F  # noqa: N812  (torch's convention)
 from evcd.agents.base import (
     Agent,
     Transition,
-    check_blocks,
+    layout_option,
     observation_layout,
     observation_units,
 )
@@ -74,7 +74,8 @@ class DQNAgent(Agent):
             observation as given (for environments whose observations are already scaled).
         normalized: whether the environment normalises its observations (``normalize_obs``); the
             network's input is the same either way (needs ``points``).
-        obs_blocks: 3 for ``[D, N, Z]``, 4 for the fleet's ``[D, N, Z, H]`` (one network for all its EVs).
+        obs_blocks: 3 for ``[D, N, Z]``, 4 for the fleet's ``[D, N, Z, H]`` (one network for all its EVs),
+            or a layout's letters with the observation options' blocks (e.g. ``"DNZP"``).
         checkpoint: load this checkpoint's policy (a training checkpoint or run directory) after building.
     """
 
@@ -94,7 +95,7 @@ class DQNAgent(Agent):
         dueling: bool = False,
         points: int | Sequence[int] | None = None,
         normalized: bool = False,
-        obs_blocks: int = 3,
+        obs_blocks: int | str = 3,
         checkpoint: str | Path | None = None,
         **hyperparameters: Any,
     ) -> None:
@@ -102,19 +103,20 @@ class DQNAgent(Agent):
         self.config = with_overrides("DQNAgent", DQNConfig, config, hyperparameters)
         self.double = check_bool("double", double)
         self.dueling = check_bool("dueling", dueling)
-        self.blocks = check_blocks(obs_blocks, "obs_blocks")
+        self.layout = layout_option(obs_blocks)
+        self.blocks = len(self.layout)
         self.obs_dim = self.blocks * self.n_stations
-        if self.config.in_turn and self.blocks != 4:
+        if self.config.in_turn and "H" not in self.layout:
             raise ValueError(
-                f"in_turn=True with obs_blocks={self.blocks}: in_turn is the fleet's (task=fleet, "
+                f"in_turn=True with obs_blocks={obs_blocks!r}: in_turn is the fleet's (task=fleet, "
                 "[D, N, Z, H]: the EVs of one tick decide one after the other); the single "
                 "environment has one EV (in_turn=false)"
             )
         self.normalized = check_bool("normalized", normalized)
-        self._divisors = observation_divisors(points, self.n_stations, self.blocks, self.normalized)
+        self._divisors = observation_divisors(points, self.n_stations, self.layout, self.normalized)
         m = self.n_stations
         #: one vehicle in the observation's Z and H units (in_turn's corrections)
-        self._vehicle = 1.0 / self._divisors[-m:] if self.normalized else np.ones(m)
+        self._vehicle = 1.0 / self._divisors[2 * m : 3 * m] if self.normalized else np.ones(m)
         #: physical observation (m, vehicles) -> network input; saved with the networks
         self.input_scale = np.ones(self.obs_dim, np.float32) if points is None else 1.0 / self._divisors
         self._set_input_scale(self.input_scale)
@@ -401,7 +403,7 @@ class DQNAgent(Agent):
             "double": self.double,
         }
         scale = check_policy_state(
-            state, self.input_scale, mine, f"{self.blocks} x {self.n_stations} stations"
+            state, self.input_scale, mine, f"layout {self.layout}: {self.blocks} x {self.n_stations} stations"
         )
         if not np.array_equal(scale, self.input_scale):
             log.info("the checkpoint's network reads observations at its own scale (trained with other "

@@ -45,7 +45,8 @@ def check_policy_state(
     if scale.shape != input_scale.shape:
         raise CheckpointError(
             f"the checkpoint was made for observations of size {scale.shape[0]}; this "
-            f"environment's are {input_scale.shape[0]} ({layout})"
+            f"environment's are {input_scale.shape[0]} ({layout}; the observation options, env.observe, "
+            "add blocks: evaluate with those it was trained with)"
         )
     saved = _network_settings(state["config"])
     for key, value in settings.items():

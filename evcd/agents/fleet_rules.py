@@ -97,7 +97,7 @@ class ReservationAgent(QueueAwareAgent):
         """
         d, n, z, h = self.read(obs)
         assert h is not None  # obs_blocks = (4,)
-        return self.score(d, n, z + h)
+        return self.score(d, n, z + h, **self.known(obs))
 
 
 class CentralAgent(ReservationAgent):
@@ -158,11 +158,13 @@ class CentralAgent(ReservationAgent):
         k, m = d.shape
         ahead = z + h  # (k, m): what each EV counts at each station before this tick's assignments
         counted = counted_at(d, episodes)
-        order = np.argsort(self.score(d, n, ahead).min(axis=1), kind="stable")
+        known = self.known(batch)  # the points in service and route times, where observed
+        order = np.argsort(self.score(d, n, ahead, **known).min(axis=1), kind="stable")
         moved = np.zeros(m)  # vehicles added (+1) and removed (-1) per station by the assignments so far
         stations = np.empty(k, dtype=np.int64)
         for j in order:
-            s = self.keep(self.score(d[j], n[j], ahead[j] + moved), int(counted[j]))
+            row = {key: value[j] for key, value in known.items()}
+            s = self.keep(self.score(d[j], n[j], ahead[j] + moved, **row), int(counted[j]))
             stations[j] = s
             if counted[j] != s:
                 moved[s] += 1.0

@@ -23,6 +23,10 @@ from evcd.agents.base import Agent, EpisodeState, observation_units, split_obser
 from evcd.env.observation import to_physical
 from evcd.utils.validation import check_int, check_real
 
+#: The backlog the queue-aware estimate gives a station with no point in service (s): it is chosen
+#: only if every station is closed.
+CLOSED_S = 1.0e7
+
 
 @dataclass
 class RandomEpisode(EpisodeState):
@@ -62,8 +66,8 @@ class GreedyAgent(Agent):
 
     def decide(self, obs: np.ndarray, episodes: Sequence[EpisodeState], explore: bool = False) -> np.ndarray:
         """``argmin D`` of each observation."""
-        distance = split_observation(obs, self.n_stations, self.blocks_of(obs))[0]
-        return np.argmin(distance, axis=-1).astype(np.int64)
+        self.blocks_of(obs)
+        return np.argmin(self.parts(obs)["D"], axis=-1).astype(np.int64)
 
 
 class QueueAwareAgent(Agent):
@@ -81,6 +85,9 @@ class QueueAwareAgent(Agent):
     Score ``t + max(0, b - t) = max(t, b)``; ties go to the lowest index. A station whose car park
     the target is in (``D == 0``) counts the target in its ``Z``, so it is discounted there. On the
     fleet's observation ``H`` is ignored (:class:`~evcd.agents.fleet_rules.ReservationAgent` counts it).
+    Where the observation has the options' blocks (:mod:`evcd.env.observation`), it reads them as a
+    navigation service would: ``k`` is the points in service (``P``; a station with none scores
+    :data:`CLOSED_S`) and ``t`` the route's current travel time (``T``).
 
     Args:
         n_stations: number of stations.
@@ -133,26 +140,56 @@ class QueueAwareAgent(Agent):
         Raises:
             ValueError: ``obs`` has none of the shapes of :attr:`obs_blocks` (the message names them).
         """
-        blocks = self.blocks_of(obs)
-        physical = to_physical(obs, self.points, self.normalized, blocks)
-        parts = split_observation(physical, self.n_stations, blocks)
-        d, n, z = parts[:3]
-        z = np.rint(z) - (d == 0.0)  # the target itself is counted in Z where it waits
-        h = np.rint(parts[3]) if blocks == 4 else None
-        return d, n, z, h
+        p = self.physical(obs)
+        d = p["D"]
+        z = np.rint(p["Z"]) - (d == 0.0)  # the target itself is counted in Z where it waits
+        return d, p["N"], z, np.rint(p["H"]) if "H" in p else None
 
-    def score(self, d: np.ndarray, n: np.ndarray, ahead: np.ndarray) -> np.ndarray:
+    def physical(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """Every block of ``obs`` by letter in metres, vehicles and seconds (float64)."""
+        layout = self.layout or ("DNZH" if self.blocks_of(obs) == 4 else "DNZ")
+        physical = to_physical(obs, self.points, self.normalized, layout)
+        return dict(zip(layout, split_observation(physical, self.n_stations, layout), strict=True))
+
+    def score(
+        self,
+        d: np.ndarray,
+        n: np.ndarray,
+        ahead: np.ndarray,
+        points: np.ndarray | None = None,
+        drive: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Estimated seconds to the start of charging, ``max(t, b)`` (see the class), from the
         physical ``D`` and ``N`` and the vehicles ``ahead`` of the target at each station (its
-        backlog counts them instead of ``Z``)."""
-        drive = d / self.speed_mps + n * self.vehicle_delay_s
-        backlog = np.maximum(0.0, ahead - self.points + 1.0) * self.charge_s / self.points
+        backlog counts them instead of ``Z``). ``points``: the points in service (the observation's
+        ``P``; default the stations' points; a station with none is never chosen while another has
+        some); ``drive``: the route's travel time (its ``T``; default ``t`` from ``D`` and ``N``)."""
+        if drive is None:
+            drive = d / self.speed_mps + n * self.vehicle_delay_s
+        k = self.points if points is None else np.asarray(points, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            backlog = np.where(
+                k > 0, np.maximum(0.0, ahead - k + 1.0) * self.charge_s / np.maximum(k, 1.0), CLOSED_S
+            )
         return np.maximum(drive, backlog)
 
     def estimate(self, obs: np.ndarray) -> np.ndarray:
-        """Estimated seconds to the start of charging at each station (of each row of a batch)."""
+        """Estimated seconds to the start of charging at each station (of each row of a batch),
+        reading the points in service (``P``) and the route's travel time (``T``) where the
+        observation has them."""
         d, n, z, _ = self.read(obs)
-        return self.score(d, n, z)
+        return self.score(d, n, z, **self.known(obs))
+
+    def known(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """What the observation options tell the estimate: ``points`` (``P``) and ``drive`` (``T``),
+        where the observation has them."""
+        p = self.physical(obs)
+        out = {}
+        if "P" in p:
+            out["points"] = np.rint(p["P"])
+        if "T" in p:
+            out["drive"] = p["T"]
+        return out
 
     def decide(self, obs: np.ndarray, episodes: Sequence[EpisodeState], explore: bool = False) -> np.ndarray:
         """The station with the smallest :meth:`estimate`, per observation."""

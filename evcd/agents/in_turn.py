@@ -47,7 +47,8 @@ def decide_in_turn(
     choices before it (module docstring).
 
     Args:
-        obs: the ``k`` EVs' fleet observations ``[D, N, Z, H]``, shape ``(k, 4m)``, in the env's units.
+        obs: the ``k`` EVs' fleet observations ``[D, N, Z, H]`` (and the observation options' blocks
+            after them, left as they are), shape ``(k, 4m)`` (or wider), in the env's units.
         counted: per EV, the station it is counted at before the tick (-1: unknown; :func:`counted_at`):
             in its ``Z`` if the EV waits in a car park (``D == 0`` there), else in its ``H``.
         vehicle: per station, what one vehicle is in the observation's ``Z`` and ``H`` units (1, or
@@ -62,10 +63,10 @@ def decide_in_turn(
         ValueError: ``obs`` is not ``(k, 4m)``, or ``order`` is not a permutation of its rows.
     """
     seen = np.array(obs, dtype=np.float32)
-    if seen.ndim != 2 or seen.shape[1] % 4:
+    m = len(vehicle)
+    if seen.ndim != 2 or seen.shape[1] % m or seen.shape[1] < 4 * m:
         raise ValueError(f"observations of shape {seen.shape}: expected (k, 4m), [D, N, Z, H] per row")
-    k, width = seen.shape
-    m = width // 4
+    k = len(seen)
     if sorted(int(j) for j in order) != list(range(k)):
         raise ValueError(f"order {list(order)}: must be a permutation of the {k} rows")
     waiting = (seen[:, :m] == 0.0).any(axis=1)
@@ -75,7 +76,7 @@ def decide_in_turn(
     for j in order:
         row = seen[j]
         row[2 * m : 3 * m] = np.maximum(0.0, row[2 * m : 3 * m] + moved_z * vehicle)
-        row[3 * m :] = np.maximum(0.0, row[3 * m :] + moved_h * vehicle)
+        row[3 * m : 4 * m] = np.maximum(0.0, row[3 * m : 4 * m] + moved_h * vehicle)
         s = int(choose(int(j), row))
         stations[j] = s
         c = int(counted[j])

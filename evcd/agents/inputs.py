@@ -16,13 +16,14 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from evcd.env.observation import unit_divisors
+from evcd.env.observation import check_layout, unit_divisors
 
 
 def observation_divisors(
-    points: int | Sequence[int] | None, n_stations: int, blocks: int, normalized: bool
+    points: int | Sequence[int] | None, n_stations: int, blocks: int | str, normalized: bool
 ) -> np.ndarray:
-    """What the environment's observation units are worth in physical ones (float64, ``blocks * m``):
+    """What the environment's observation units are worth in physical ones (float64, one per entry of
+    a vector of layout ``blocks``: 3, 4 or its letters, :func:`~evcd.env.observation.check_layout`):
     :func:`~evcd.env.observation.unit_divisors` of the stations' ``points``, or ones for
     ``points=None`` (an observation taken as given).
 
@@ -34,7 +35,7 @@ def observation_divisors(
         if normalized:
             raise ValueError("normalized=True needs the stations' charging points (points=...), to "
                              "read Z in vehicles")  # fmt: skip
-        return np.ones(blocks * n_stations)
+        return np.ones(len(check_layout(blocks)) * n_stations)
     pts = np.broadcast_to(np.asarray(points), (n_stations,)) if np.ndim(points) == 0 else np.asarray(points)
     if pts.shape != (n_stations,) or not np.issubdtype(pts.dtype, np.integer) or (pts < 1).any():
         raise ValueError(f"points={points!r}: must be an integer >= 1 or {n_stations} of them")
@@ -48,7 +49,7 @@ def input_factor(input_scale: np.ndarray, divisors: np.ndarray, normalized: bool
     return (np.asarray(input_scale, np.float32).astype(np.float64) * units).astype(np.float32)
 
 
-def network_input(obs: np.ndarray, factor: np.ndarray, blocks: int) -> torch.Tensor:
+def network_input(obs: np.ndarray, factor: np.ndarray, blocks: int | str) -> torch.Tensor:
     """``obs`` (one observation or a batch) times ``factor`` (:func:`input_factor`), as a float32
     tensor.
 

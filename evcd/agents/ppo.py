@@ -41,7 +41,7 @@ from evcd.agents.base import (
     Agent,
     EpisodeState,
     Transition,
-    check_blocks,
+    layout_option,
     observation_layout,
     observation_units,
 )
@@ -83,7 +83,8 @@ class PPOAgent(Agent):
             keywords replace fields of it.
         points, normalized: the environment's charging points and whether it normalises (the
             network then reads km, tens of vehicles, multiples of the points; read off the env).
-        obs_blocks: 3 for ``[D, N, Z]``, 4 for the fleet's ``[D, N, Z, H]``.
+        obs_blocks: 3 for ``[D, N, Z]``, 4 for the fleet's ``[D, N, Z, H]``, or a layout's letters with
+            the observation options' blocks (e.g. ``"DNZP"``).
         checkpoint: unused here (``scripts/evaluate.py`` loads a policy through the protocol); kept so
             that the agent's Hydra block can carry ``agent.checkpoint``.
     """
@@ -102,17 +103,18 @@ class PPOAgent(Agent):
         *,
         points: int | Sequence[int] | None = None,
         normalized: bool = False,
-        obs_blocks: int = 3,
+        obs_blocks: int | str = 3,
         checkpoint: Any = None,
         **hyperparameters: Any,
     ) -> None:
         super().__init__(n_stations, rng)
         del checkpoint
         self.config = with_overrides("PPOAgent", PPOConfig, config, hyperparameters)
-        self.blocks = check_blocks(obs_blocks, "obs_blocks")
+        self.layout = layout_option(obs_blocks)
+        self.blocks = len(self.layout)
         self.obs_dim = self.blocks * self.n_stations
         self.normalized = check_bool("normalized", normalized)
-        self._divisors = observation_divisors(points, self.n_stations, self.blocks, self.normalized)
+        self._divisors = observation_divisors(points, self.n_stations, self.layout, self.normalized)
         self._set_input_scale(np.ones(self.obs_dim) if points is None else 1.0 / self._divisors)
         c = self.config
         with torch.random.fork_rng(devices=[]):
@@ -342,7 +344,8 @@ class PPOAgent(Agent):
         if (state["n_stations"], state["obs_dim"], theirs) != (self.n_stations, self.obs_dim, mine):
             raise CheckpointError(f"the checkpoint's PPO policy ({state['n_stations']} stations, "
                                   f"observation {state['obs_dim']}, {theirs}) does not fit this agent "
-                                  f"({self.n_stations}, {self.obs_dim}, {mine})")  # fmt: skip
+                                  f"({self.n_stations}, {self.obs_dim} = layout {self.layout}, {mine}; the "
+                                  "observation options, env.observe, add blocks)")  # fmt: skip
         try:
             self.actor.load_state_dict(state["actor"])
             self.critic.load_state_dict(state["critic"])

@@ -36,7 +36,7 @@ from evcd.env.episode_rules import (
     slot_end_reason,
     visits_of,
 )
-from evcd.env.observation import Observation, observation_bounds
+from evcd.env.observation import Observation, layout_of, observation_bounds
 from evcd.env.reward import Slot
 from evcd.env.target import TARGET_ID, OriginSampler, Target, TargetPlan, draw_plan
 from evcd.env.world import InWorld, World
@@ -98,6 +98,10 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
         perturbations: a day that is not calm (:mod:`evcd.sim.perturbations`: e.g.
             ``{"outages": {"per_day": 2}}``, charger outages drawn from each day's seed); ``None``
             (default): every day calm, as before.
+        observe: observation options, blocks after ``[D, N, Z]`` (:mod:`evcd.env.observation`):
+            ``"points_in_service"`` (``P``: each station's points in service now) and
+            ``"route_time"`` (``T``: the route's current travel time, s); default none. The
+            observation's layout is :attr:`layout` (e.g. ``"DNZP"``).
 
     Every invalid argument raises ``ValueError`` naming it before SUMO starts. The seed is given
     through ``reset(seed=...)``: one generator drives the day, the departure, the origin and the
@@ -132,6 +136,7 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
         max_insert_delay: float = 600.0,
         gui: bool = False,
         perturbations: Perturbations | Mapping[str, Any] | None = None,
+        observe: Sequence[str] = (),
     ) -> None:
         self.world = World(EnvConfig(
             scenario=scenario, evs=evs, decision_interval=decision_interval,
@@ -140,11 +145,13 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
             demand=demand, demand_seeds=demand_seeds, route_file=route_file, cache_dir=cache_dir,
             snapshot_every=snapshot_every, step_length=step_length, time_to_teleport=time_to_teleport,
             stuck_limit=stuck_limit, day_end=day_end, max_insert_delay=max_insert_delay, gui=gui,
-            perturbations=perturbations,
+            perturbations=perturbations, observe=observe,
         ))  # fmt: skip
         m = len(self.stations)
         self.action_space = gymnasium.spaces.Discrete(m)
-        low, high = observation_bounds(self.stations, self.config.normalize_obs)
+        #: the observation's blocks, one letter each (:func:`evcd.env.observation.check_layout`)
+        self.layout = layout_of("DNZ", self.config.observe)
+        low, high = observation_bounds(self.stations, self.config.normalize_obs, self.layout)
         self.observation_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
         self._episode: _Episode | None = None
         self._episodes = 0

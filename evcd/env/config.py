@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from evcd.env.observation import OPTIONS
 from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.scenario import JURONG_WEST, Scenario, load_scenario
 from evcd.sim.perturbations import Perturbations
@@ -48,6 +49,7 @@ class EnvConfig:
     max_insert_delay: float = 600.0
     gui: bool = False
     perturbations: Perturbations | Mapping[str, Any] | None = None
+    observe: Sequence[str] = ()
     demand_config: DemandConfig = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -94,6 +96,15 @@ class EnvConfig:
                 raise ValueError(f"route_file={str(self.route_file)!r}: no such file")
         object.__setattr__(self, "demand_config", self._demand_config())
         object.__setattr__(self, "perturbations", Perturbations.from_value(self.perturbations))
+        if isinstance(self.observe, str) or not all(isinstance(o, str) for o in self.observe):
+            raise ValueError(f"observe={self.observe!r}: must be a list of options from {', '.join(OPTIONS)}")
+        unknown = sorted(set(self.observe) - set(OPTIONS))
+        if unknown:
+            raise ValueError(
+                f"observe={list(self.observe)}: unknown option {unknown[0]!r}; the options: "
+                f"{', '.join(OPTIONS)}"
+            )
+        object.__setattr__(self, "observe", tuple(o for o in OPTIONS if o in self.observe))
 
     def _demand_config(self) -> DemandConfig:
         demand = self.demand

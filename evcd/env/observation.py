@@ -15,15 +15,34 @@ For each station ``i`` (in the scenario's order), from the target's current posi
 Cost per observation: one ``findRoute`` per station (a few more in the rare loop case) and one
 ``getLastStepVehicleNumber`` per distinct edge of the union of the routes; no per-vehicle calls.
 
-With normalisation, ``D`` is in km, ``N`` in tens of vehicles and ``Z`` in multiples of the
-station's charging points (1 = all points busy, above 1 = a queue).
+Observation options (``EnvConfig.observe``, off by default: what a navigation service knows) add
+blocks after these, in this order:
+
+- ``P[i]`` (``points_in_service``): station ``i``'s charging points in service now (its points
+  less those of its charger outages in force, :mod:`evcd.sim.outages`).
+- ``T[i]`` (``route_time``): the route's current estimated travel time (s): each of its edges' length
+  over the mean speed of the vehicles on it in the last step (``edge.getLastStepMeanSpeed``: its
+  current limit when empty, so that an incident, rain or road works show), that speed floored at
+  :data:`FLOOR_SHARE` of the limit (one car waiting at a light is not a road at a standstill; SUMO's
+  own ``edge.getTraveltime`` divides by the bare mean and gave 42,000 s for a 140 m edge holding a
+  car just inserted), the target's own edge at its limit (its own speed is not the road's), the
+  first and last edges counted for the part of them driven. 0 where the target waits;
+  :data:`UNREACHABLE_S` without a route.
+
+A *layout* names the blocks of a vector in order, one letter each: ``"DNZ"`` (this environment),
+``"DNZH"`` (the fleet's, :mod:`evcd.env.fleet`), then the options' letters (e.g. ``"DNZP"``,
+``"DNZHPT"``); :func:`check_layout` says which are valid.
+
+With normalisation, ``D`` is in km, ``N`` in tens of vehicles, ``Z`` (and ``H``, ``P``) in multiples of
+the station's charging points (``Z``: 1 = all points busy, above 1 = a queue; ``P``: 1 = all in
+service) and ``T`` in minutes.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -37,10 +56,52 @@ log = logging.getLogger(__name__)
 
 #: ``D`` of a station the router finds no route to (m); also the upper bound of ``D``.
 UNREACHABLE_M = 1.0e6
+#: ``T`` of a station the router finds no route to (s); also the upper bound of ``T``.
+UNREACHABLE_S = 1.0e6
 #: Upper bound of ``N`` in the observation space.
 MAX_VEHICLES = 1.0e6
 D_SCALE_M = 1000.0
 N_SCALE = 10.0
+T_SCALE_S = 60.0
+#: ``T``'s floor of an edge's speed, as a share of its current limit.
+FLOOR_SHARE = 0.1
+#: The base layouts: the single environment's and the fleet's.
+BASE_LAYOUTS = ("DNZ", "DNZH")
+#: Observation options (``EnvConfig.observe``) and their blocks, in the order the blocks follow the base.
+OPTIONS: dict[str, str] = {"points_in_service": "P", "route_time": "T"}
+
+
+def check_layout(layout: str | int) -> str:
+    """``layout`` as block letters: a base layout (``"DNZ"``, ``"DNZH"``; or 3 and 4, their block
+    counts) followed by any of the options' blocks, each once, in :data:`OPTIONS`' order.
+
+    Raises:
+        ValueError: anything else (the message names the allowed forms).
+    """
+    if isinstance(layout, bool):
+        layout = str(layout)
+    if isinstance(layout, (int, np.integer)) and int(layout) in (3, 4):
+        return BASE_LAYOUTS[int(layout) - 3]
+    text = str(layout)
+    base = "DNZH" if text.startswith("DNZH") else "DNZ"
+    rest = text[len(base) :]
+    order = "".join(OPTIONS.values())
+    if not text.startswith("DNZ") or rest != "".join(c for c in order if c in rest):
+        raise ValueError(
+            f"layout {layout!r}: must be 3 / 'DNZ' or 4 / 'DNZH', followed by any of {', '.join(order)} in "
+            f"that order (e.g. 'DNZP', 'DNZHPT')"
+        )
+    return text
+
+
+def routes_start(routes: Sequence[tuple[str, ...]]) -> str | None:
+    """The edge the routes start on (the target's), ``None`` if none has edges."""
+    return next((r[0] for r in routes if r), None)
+
+
+def layout_of(base: str, observe: Sequence[str] = ()) -> str:
+    """The layout of ``base`` (``"DNZ"`` or ``"DNZH"``) with the observation options ``observe``."""
+    return check_layout(base + "".join(OPTIONS[o] for o in OPTIONS if o in observe))
 
 
 @dataclass(frozen=True)
@@ -51,51 +112,55 @@ class Observation:
     vehicles: np.ndarray  # N, int
     occupancy: np.ndarray  # Z, int
     routes: tuple[tuple[str, ...], ...]  # the route to each station, starting with the current edge
-    vector: np.ndarray  # float32 [D, N, Z], normalised if asked
+    vector: np.ndarray  # float32 in the observer's layout, normalised if asked
+    extra: Mapping[str, np.ndarray] = field(default_factory=dict)  # the options' blocks, raw, by letter
 
 
-def unit_divisors(points: Sequence[int] | np.ndarray, blocks: int = 3) -> np.ndarray:
-    """What normalisation divides ``[D, N, Z]`` by (float64, length ``3m``): :data:`D_SCALE_M` (m -> km),
-    :data:`N_SCALE` (tens of vehicles) and each station's charging points (``Z`` in multiples of them).
-    With ``blocks=4``, the fleet's ``[D, N, Z, H]`` (:mod:`evcd.env.fleet`): ``H`` in multiples of the
-    points too. The one definition of the scaled units: the environments' normalisation and the
-    agents' reading of observations both use it."""
-    if blocks not in (3, 4):
-        raise ValueError(f"blocks={blocks!r}: must be 3 ([D, N, Z]) or 4 ([D, N, Z, H])")
+def unit_divisors(points: Sequence[int] | np.ndarray, layout: str | int = "DNZ") -> np.ndarray:
+    """What normalisation divides a vector of ``layout`` by (float64, one value per entry):
+    :data:`D_SCALE_M` (m -> km), :data:`N_SCALE` (tens of vehicles), each station's charging points
+    (``Z``, ``H``, ``P``: multiples of them) and :data:`T_SCALE_S` (s -> min). The one definition of the
+    scaled units: the environments' normalisation and the agents' reading of observations both use it."""
+    letters = check_layout(layout)
     pts = np.asarray(points, dtype=np.float64)
     m = pts.size
-    return np.concatenate([np.full(m, D_SCALE_M), np.full(m, N_SCALE), *([pts] * (blocks - 2))])
+    per = {"D": np.full(m, D_SCALE_M), "N": np.full(m, N_SCALE), "T": np.full(m, T_SCALE_S)}
+    return np.concatenate([per.get(c, pts) for c in letters])
 
 
-def to_vector(
-    dist: np.ndarray,
-    vehicles: np.ndarray,
-    occupancy: np.ndarray,
-    stations: Sequence[Station],
-    normalize: bool,
+def block_vector(
+    blocks: Mapping[str, np.ndarray], layout: str, stations: Sequence[Station], normalize: bool
 ) -> np.ndarray:
-    """The float32 vector ``[D, N, Z]``, normalised (:func:`unit_divisors`) or raw."""
-    raw = np.concatenate([dist, vehicles, occupancy]).astype(np.float64)
+    """The float32 vector of ``blocks`` (letter -> values per station) in ``layout``'s order,
+    normalised (:func:`unit_divisors`) or raw."""
+    raw = np.concatenate([np.asarray(blocks[c], dtype=np.float64) for c in layout])
     if normalize:
-        raw = raw / unit_divisors([st.points for st in stations])
+        raw = raw / unit_divisors([st.points for st in stations], layout)
     return raw.astype(np.float32)
 
 
 def to_physical(
-    obs: np.ndarray, points: Sequence[int] | np.ndarray, normalized: bool, blocks: int = 3
+    obs: np.ndarray, points: Sequence[int] | np.ndarray, normalized: bool, layout: str | int = "DNZ"
 ) -> np.ndarray:
-    """Observation vectors (one ``(blocks * m,)`` or a batch) in metres and vehicles (float64),
-    whether the environment normalised them (``normalized``) or not; ``blocks=4`` for the fleet's."""
+    """Observation vectors of ``layout`` (one or a batch) in metres, vehicles and seconds (float64),
+    whether the environment normalised them (``normalized``) or not."""
     x = np.asarray(obs).astype(np.float64)
-    return x * unit_divisors(points, blocks) if normalized else x
+    return x * unit_divisors(points, layout) if normalized else x
 
 
-def observation_bounds(stations: Sequence[Station], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Lowest and highest possible vectors (``Z`` is bounded by the car parks' capacity)."""
+def observation_bounds(
+    stations: Sequence[Station], normalize: bool, layout: str = "DNZ"
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest possible vectors of ``layout`` (``Z`` is bounded by the car parks' capacity,
+    ``P`` by the points)."""
     m = len(stations)
-    lots = np.array([st.lot_capacity for st in stations], dtype=np.float64)
-    high = to_vector(np.full(m, UNREACHABLE_M), np.full(m, MAX_VEHICLES), lots, stations, normalize)
-    return np.zeros(3 * m, dtype=np.float32), high
+    high = {
+        "D": np.full(m, UNREACHABLE_M), "N": np.full(m, MAX_VEHICLES), "H": np.full(m, MAX_VEHICLES),
+        "Z": np.array([st.lot_capacity for st in stations], dtype=np.float64),
+        "P": np.array([st.points for st in stations], dtype=np.float64), "T": np.full(m, UNREACHABLE_S),
+    }  # fmt: skip
+    layout = check_layout(layout)
+    return np.zeros(len(layout) * m, dtype=np.float32), block_vector(high, layout, stations, normalize)
 
 
 class RouteObserver:
@@ -106,21 +171,33 @@ class RouteObserver:
         graph: the network's drivable edges (lengths and successors).
         vtype: vehicle type the router plans for (the target's).
         normalize: scale the vector (see the module docstring).
+        observe: the observation options (:data:`OPTIONS`: ``points_in_service``, ``route_time``).
     """
 
     def __init__(
-        self, stations: Sequence[Station], graph: RoadGraph, vtype: str = "ev", normalize: bool = False
+        self,
+        stations: Sequence[Station],
+        graph: RoadGraph,
+        vtype: str = "ev",
+        normalize: bool = False,
+        observe: Sequence[str] = (),
     ) -> None:
         self.stations = tuple(stations)
         self.graph = graph
         self.vtype = vtype
         self.normalize = normalize
+        unknown = sorted(set(observe) - set(OPTIONS))
+        if unknown:
+            raise ValueError(
+                f"observe={list(observe)}: unknown option {unknown[0]!r}; the options: {', '.join(OPTIONS)}"
+            )
+        self.layout = layout_of("DNZ", observe)
         self._edge_len = {st.edge: float(graph.lengths[graph.index[st.edge]]) for st in self.stations}
 
     @property
     def size(self) -> int:
-        """Length of the observation vector (3 x stations)."""
-        return 3 * len(self.stations)
+        """Length of the observation vector (blocks of the layout x stations)."""
+        return len(self.layout) * len(self.stations)
 
     def observe(
         self,
@@ -166,11 +243,45 @@ class RouteObserver:
         occupancy = np.array(controller.occupancies(), dtype=np.int64)
         if queued_at is not None:
             occupancy[queued_at] += 1
-        return Observation(dist, vehicles, occupancy, tuple(routes), self.vector(dist, vehicles, occupancy))
+        extra: dict[str, np.ndarray] = {}
+        if "P" in self.layout:
+            now = api.simulation.getTime()
+            extra["P"] = np.array([controller.points_in_service(st.id, now) for st in self.stations])
+        if "T" in self.layout:
+            extra["T"] = self._route_times(api, routes, dist, pos)
+        blocks = {"D": dist, "N": vehicles, "Z": occupancy, **extra}
+        vector = block_vector(blocks, self.layout, self.stations, self.normalize)
+        return Observation(dist, vehicles, occupancy, tuple(routes), vector, extra)
 
-    def vector(self, dist: np.ndarray, vehicles: np.ndarray, occupancy: np.ndarray) -> np.ndarray:
-        """The float32 vector ``[D, N, Z]`` (normalised if the observer normalises)."""
-        return to_vector(dist, vehicles, occupancy, self.stations, self.normalize)
+    def _route_times(
+        self, api: Any, routes: Sequence[tuple[str, ...]], dist: np.ndarray, pos: float
+    ) -> np.ndarray:
+        """``T``: SUMO's current travel time of each route's edges, the first and last edges for the
+        part of them driven (module docstring)."""
+        tt = {}
+        for e in {e for r in routes for e in r}:
+            limit = float(api.lane.getMaxSpeed(f"{e}_0"))
+            mean = limit if e == routes_start(routes) else float(api.edge.getLastStepMeanSpeed(e))
+            tt[e] = self._length(e) / max(mean, FLOOR_SHARE * limit)
+        out = np.zeros(len(routes))
+        for i, (route, st) in enumerate(zip(routes, self.stations, strict=True)):
+            if not route:
+                out[i] = UNREACHABLE_S if dist[i] >= UNREACHABLE_M else 0.0
+                continue
+            share = np.ones(len(route))
+            first, last = self._length(route[0]), self._length(route[-1])
+            share[0] = max(0.0, first - pos) / first
+            if len(route) == 1:
+                share[0] = max(0.0, st.end_pos - pos) / first
+            else:
+                share[-1] = st.end_pos / last
+            out[i] = sum(tt[e] * f for e, f in zip(route, share, strict=True))
+        return out
+
+    def _length(self, edge: str) -> float:
+        """An edge's length (1 for one the graph does not hold)."""
+        idx = self.graph.index.get(edge)
+        return float(self.graph.lengths[idx]) if idx is not None else 1.0
 
     # ------------------------------------------------------------------ routing
     def _route(self, api: Any, road: str, pos: float, st: Station) -> tuple[float, tuple[str, ...]]:

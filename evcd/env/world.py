@@ -57,8 +57,10 @@ class World:
 
     @cached_property
     def observer(self) -> RouteObserver:
-        """Computes ``[D, N, Z]`` (:mod:`evcd.env.observation`) in the configured units."""
-        return RouteObserver(self.stations, self.graph, normalize=self.config.normalize_obs)
+        """Computes ``[D, N, Z]`` and the observation options' blocks (:mod:`evcd.env.observation`) in the
+        configured units."""
+        cfg = self.config
+        return RouteObserver(self.stations, self.graph, normalize=cfg.normalize_obs, observe=cfg.observe)
 
     def prepare(self) -> None:
         """Build (or verify) every background day's snapshots now instead of at first use."""

@@ -32,7 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm.auto import tqdm
 
-from evcd.agents.base import Agent, EpisodeState, observation_units
+from evcd.agents.base import Agent, EpisodeState, observation_layout, observation_units
 from evcd.env.charging_nav import ChargingNavEnv
 from evcd.env.observation import unit_divisors
 from evcd.env.sweep import SweepVectorEnv
@@ -243,11 +243,13 @@ class SB3Policy(Agent):
     It does not learn (evcd's trainer only evaluates it).
 
     Args:
-        model: the trained SB3 model (its observations the normalised ``[D, N, Z]``).
+        model: the trained SB3 model (its observations the normalised ``[D, N, Z]`` and the observation
+            options' blocks, ``layout``).
         n_stations: the stations of the world it plays in.
         points: each station's charging points (the normalisation of ``Z``).
         normalized: whether the playing environment already normalises its observations.
         label: its name in results (``sb3_ppo``, ``sb3_dqn``).
+        layout: the observations' layout (:func:`evcd.env.observation.check_layout`).
     """
 
     name = "sb3"
@@ -260,17 +262,20 @@ class SB3Policy(Agent):
         normalized: bool,
         label: str,
         rng: np.random.Generator | None = None,
+        layout: str = "DNZ",
     ) -> None:
         super().__init__(n_stations, np.random.default_rng(0) if rng is None else rng)
         self.model = model
         self.name = label  # type: ignore[misc]  (an instance's name: the SB3 algorithm it runs)
-        self._divisors = None if normalized else unit_divisors(points)
+        self.layout = layout
+        self._divisors = None if normalized else unit_divisors(points, layout)
 
     @classmethod
     def for_env(cls, env: Any, model: Any, label: str) -> SB3Policy:
         """This policy for playing in ``env`` (its stations and observation units)."""
         units = observation_units(env)
-        return cls(model, len(units["points"]), units["points"], units["normalized"], label)
+        layout = observation_layout(env)
+        return cls(model, len(units["points"]), units["points"], units["normalized"], label, layout=layout)
 
     def decide(self, obs: np.ndarray, episodes: Sequence[EpisodeState], explore: bool = False) -> np.ndarray:
         """The model's deterministic stations for ``k`` episodes (``explore`` is ignored)."""

@@ -88,15 +88,15 @@ def test_observation_blocks_reads_the_layout_off_the_size():
 
 
 def test_fleet_divisors_and_physical_units():
-    assert unit_divisors([2, 3], blocks=4).tolist() == [D_SCALE_M, D_SCALE_M, N_SCALE, N_SCALE, 2, 3, 2, 3]
+    assert unit_divisors([2, 3], 4).tolist() == [D_SCALE_M, D_SCALE_M, N_SCALE, N_SCALE, 2, 3, 2, 3]
     rng = np.random.default_rng(0)
     points = [2, 3, 1]
     raw = random_fleet_obs(rng, 3, 4)
     np.testing.assert_allclose(to_physical(normalized(raw, points), points, True, 4), raw, rtol=1e-6)
     assert to_physical(raw, points, False, 4) is not raw  # float64 copy
     np.testing.assert_array_equal(to_physical(raw[:, :9], points, False), raw[:, :9])
-    with pytest.raises(ValueError, match="blocks=5"):
-        unit_divisors(points, blocks=5)
+    with pytest.raises(ValueError, match="layout 5: must be 3 / 'DNZ' or 4 / 'DNZH'"):
+        unit_divisors(points, 5)
 
 
 # ---------------------------------------------------------------------------------------- rules, fleet obs

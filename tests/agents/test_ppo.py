@@ -911,12 +911,12 @@ def test_a_loaded_policy_sees_what_it_was_trained_on():
 @pytest.mark.parametrize(
     ("kwargs", "named"),
     [
-        ({"n_stations": 4}, "(4, 12, "),
-        ({"n_stations": 2}, "(2, 6, "),
+        ({"n_stations": 4}, "(4, 12 = layout DNZ, "),
+        ({"n_stations": 2}, "(2, 6 = layout DNZ, "),
         ({"hidden": (16, 8)}, "'hidden': [16, 8]"),
         ({"hidden": (16,)}, "'hidden': [16]"),
         ({"network": "station"}, "'network': 'station'"),
-        ({"obs_blocks": 4}, "(3, 12, "),
+        ({"obs_blocks": 4}, "(3, 12 = layout DNZH, "),
     ],
 )
 @pytest.mark.parametrize("policy_only", [False, True])

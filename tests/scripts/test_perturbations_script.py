@@ -100,3 +100,35 @@ def test_bad_perturbations_stop_the_run_before_sumo(override, message, script_ov
     assert proc.returncode == 2, (proc.stdout + proc.stderr)[-2000:]
     assert message in proc.stdout + proc.stderr
     assert not cache.exists()
+
+
+def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script_overrides, tmp_path):
+    """A DQN with ``env.observe=[points_in_service,route_time]`` in a mixed world: it trains and is
+    evaluated beside queue_aware reading the same blocks; its saved policy evaluates in the same
+    world, and a world without the options is refused, naming the sizes, before any episode."""
+    world = [
+        *script_overrides, "perturbations=mixed", "perturbations.incidents.start_window=[21600,23400]",
+        "perturbations.rain.chance=1", "perturbations.rain.start_window=[21000,22000]",
+        "perturbations.outages.start_window=[21600,23400]", "env.observe=[points_in_service,route_time]",
+    ]  # fmt: skip
+    run = tmp_path / "run"
+    proc = run_script(
+        "train.py", *world, "agent=dqn", "learner.hidden=[16]", "learner.learning_starts=4",
+        "learner.batch_size=4", "train.episodes=4", "train.checkpoint_every=2", "eval.episodes=2",
+        "eval.baselines=[queue_aware]", "eval.bootstrap_resamples=100", f"hydra.run.dir={run}",
+    )  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    data = json.loads((run / "results.json").read_text())
+    assert data["config"]["env"]["observe"] == ["points_in_service", "route_time"]
+    assert (
+        data["agent"] == "dqn" and len(data["episodes"]) == 2 and list(data["baselines"]) == ["queue_aware"]
+    )
+    ev = tmp_path / "eval"
+    proc = run_script("evaluate.py", *world, "agent=dqn", f"agent.checkpoint={run}", "episodes=1",
+                      f"hydra.run.dir={ev}")  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    plain = [o for o in world if not o.startswith("env.observe")]
+    proc = run_script("evaluate.py", *plain, "agent=dqn", f"agent.checkpoint={run}", "episodes=1",
+                      f"hydra.run.dir={tmp_path / 'refused'}")  # fmt: skip
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 2 and "observe" in log, log[-2000:]

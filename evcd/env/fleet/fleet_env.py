@@ -53,7 +53,7 @@ from evcd.env.fleet.events import advance, heading
 from evcd.env.fleet.guided import GuidedEV, Stage
 from evcd.env.fleet.measures import FleetMeasures, measure
 from evcd.env.fleet.trips import ChargingTrip, draw_guided, in_window, read_charging_trips
-from evcd.env.observation import MAX_VEHICLES, Observation, observation_bounds, unit_divisors
+from evcd.env.observation import Observation, layout_of, observation_bounds, unit_divisors
 from evcd.env.reward import Slot
 from evcd.env.target import Target
 from evcd.env.world import InWorld, World
@@ -123,11 +123,11 @@ class FleetEnv(InWorld, ParallelEnv):
         config = EnvConfig(scenario=scenario, departure_window=departure_window, reward=reward, **world)
         self.world = World(config)
         m = len(self.stations)
-        self._h_units = unit_divisors([st.points for st in self.stations], blocks=4)[3 * m :]
-        _, high = observation_bounds(self.stations, config.normalize_obs)
-        h_high = np.full(m, MAX_VEHICLES) / (self._h_units if config.normalize_obs else 1.0)
-        high = np.concatenate([high, h_high]).astype(np.float32)
-        self._obs_space = gymnasium.spaces.Box(np.zeros(4 * m, dtype=np.float32), high, dtype=np.float32)
+        #: the observation's blocks: ``[D, N, Z, H]`` and the observation options' (e.g. ``"DNZHP"``)
+        self.layout = layout_of("DNZH", config.observe)
+        self._h_units = unit_divisors([st.points for st in self.stations], "DNZH")[3 * m :]
+        low, high = observation_bounds(self.stations, config.normalize_obs, self.layout)
+        self._obs_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
         self._act_space = gymnasium.spaces.Discrete(m)
         self.render_mode: str | None = None  # nothing to render (sumo-gui watches single targets)
         self.agents: list[str] = []
@@ -418,8 +418,9 @@ class FleetEnv(InWorld, ParallelEnv):
             if driving.get(agent):
                 h[ev.station] -= 1
             h_vec = h / self._h_units if self.config.normalize_obs else h.astype(np.float64)
-            vector = np.concatenate([obs.vector, h_vec.astype(np.float32)])
-            ev.obs = Observation(obs.distance, obs.vehicles, obs.occupancy, obs.routes, vector)
+            base = 3 * len(self.stations)  # [D, N, Z], H, then the options' blocks
+            vector = np.concatenate([obs.vector[:base], h_vec.astype(np.float32), obs.vector[base:]])
+            ev.obs = Observation(obs.distance, obs.vehicles, obs.occupancy, obs.routes, vector, obs.extra)
 
     # ------------------------------------------------------------------ info and checks
     def _info(self, ev: GuidedEV) -> dict[str, Any]:
