@@ -36,7 +36,7 @@ from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import FleetRunner, check_engine, make_runner
 from evcd.experiments.schema import register_configs
-from evcd.experiments.worlds import split_days, split_kwargs
+from evcd.experiments.worlds import check_forecaster, split_days, split_kwargs
 from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.hindsight import dispatcher_learns, dispatcher_names, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng
@@ -230,6 +230,7 @@ def train(cfg: DictConfig) -> float:
     """Run the training described by ``cfg`` in Hydra's run directory; return the evaluation mean
     travel time (what a sweeper minimises; with ``task=fleet`` the guided EVs')."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    check_forecaster(cfg)
     fleet = check_task(cfg) == "fleet"
     parts = build_fleet(cfg) if fleet else build(cfg)
     torch.set_num_threads(int(cfg.torch_threads))

@@ -35,7 +35,7 @@ from evcd.cli.run_record import write_run_record
 from evcd.env import ChargingNavEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.experiments.schema import register_configs
-from evcd.experiments.worlds import split_days, split_kwargs
+from evcd.experiments.worlds import check_forecaster, split_days, split_kwargs
 from evcd.loops.hindsight import dispatcher_learns, dispatcher_names
 from evcd.loops.run_files import RESULTS_JSON
 from evcd.loops.seeds import baseline_rng
@@ -59,6 +59,7 @@ def build(cfg: DictConfig) -> dict[str, Any]:
             f"task={cfg.task}, regime {cfg.regime!r}: train_sb3.py trains the single target "
             "(the fleet's multi-agent form is evcd.experiments.parallel_env)"
         )
+    check_forecaster(cfg)
     seed = check_int("seed", cfg.seed, minimum=0)
     train_days, eval_days = split_days(cfg, "train", seed), split_days(cfg, "eval", seed)
     if set(train_days) & set(eval_days):

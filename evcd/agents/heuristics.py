@@ -196,6 +196,36 @@ class QueueAwareAgent(Agent):
         return np.argmin(self.estimate(obs), axis=-1).astype(np.int64)
 
 
+class ForecastQueueAgent(QueueAwareAgent):
+    """:class:`QueueAwareAgent` on the forecast queue at arrival instead of the queue now: its backlog
+    counts the observation's ``F`` (the vehicles forecast at each station when the target would get
+    there, :mod:`evcd.env.observation`), so that learners face a rule that looks ahead too. It needs
+    the environment's ``observe`` to hold ``forecast`` (and reads ``P`` and ``T`` where observed).
+    A station whose car park the target is in counts the vehicles there now (the target waits in
+    its queue, ahead of anybody arriving later).
+
+    The constructor takes :class:`QueueAwareAgent`'s arguments.
+    """
+
+    name = "queue_forecast"
+
+    def estimate(self, obs: np.ndarray) -> np.ndarray:
+        """Estimated seconds to the start of charging at each station, the backlog counting ``F``.
+
+        Raises:
+            ValueError: an observation without ``F`` (the message says how to add it).
+        """
+        p = self.physical(obs)
+        if "F" not in p:
+            raise ValueError(
+                f"{self.name} reads the forecast block F: make the environment with observe=[..., forecast] "
+                f"(env.observe); this observation's layout is {self.layout or 'DNZ'}"
+            )
+        d, n, z, _ = self.read(obs)
+        ahead = np.where(d == 0.0, z, p["F"])
+        return self.score(d, n, ahead, **self.known(obs))
+
+
 class FixedStationAgent(Agent):
     """Always the same station (the building block of the best station in hindsight,
     :mod:`evcd.loops.hindsight`).

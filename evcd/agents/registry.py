@@ -207,6 +207,7 @@ for _name, _path, _defaults in (
     ("random", "evcd.agents.heuristics:RandomAgent", {}),
     ("greedy", "evcd.agents.heuristics:GreedyAgent", {}),
     ("queue_aware", "evcd.agents.heuristics:QueueAwareAgent", {}),
+    ("queue_forecast", "evcd.agents.heuristics:ForecastQueueAgent", {}),
     ("dqn", "evcd.agents.dqn:DQNAgent", {"double": False, "dueling": False}),
     ("dueling_ddqn", "evcd.agents.dqn:DQNAgent", {"double": True, "dueling": True}),
     ("reservation", "evcd.agents.fleet_rules:ReservationAgent", {}),

@@ -100,8 +100,15 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
             (default): every day calm, as before.
         observe: observation options, blocks after ``[D, N, Z]`` (:mod:`evcd.env.observation`):
             ``"points_in_service"`` (``P``: each station's points in service now) and
-            ``"route_time"`` (``T``: the route's current travel time, s); default none. The
+            ``"route_time"`` (``T``: the route's current travel time, s) and ``"forecast"`` (``F``: the
+            vehicles forecast at each station at the target's arrival); default none. The
             observation's layout is :attr:`layout` (e.g. ``"DNZP"``).
+        forecaster: what ``F`` comes from (:mod:`evcd.forecast`): ``"history"`` (per station and time
+            of day, the mean of ``forecast_days``), ``"trend"`` (a line through the current day's last
+            15 min) or ``"oracle"`` (the day's own future: analysis only), or a mapping with ``name``
+            and its settings (``bin_s``, ``window_s``, ``sample_s``).
+        forecast_days: the demand seeds of the days the history forecaster learns from (the scripts
+            give it their training days); the history forecaster refuses to run without them.
 
     Every invalid argument raises ``ValueError`` naming it before SUMO starts. The seed is given
     through ``reset(seed=...)``: one generator drives the day, the departure, the origin and the
@@ -137,6 +144,8 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
         gui: bool = False,
         perturbations: Perturbations | Mapping[str, Any] | None = None,
         observe: Sequence[str] = (),
+        forecaster: str | Mapping[str, Any] = "history",
+        forecast_days: Sequence[int] | None = None,
     ) -> None:
         self.world = World(EnvConfig(
             scenario=scenario, evs=evs, decision_interval=decision_interval,
@@ -145,7 +154,7 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
             demand=demand, demand_seeds=demand_seeds, route_file=route_file, cache_dir=cache_dir,
             snapshot_every=snapshot_every, step_length=step_length, time_to_teleport=time_to_teleport,
             stuck_limit=stuck_limit, day_end=day_end, max_insert_delay=max_insert_delay, gui=gui,
-            perturbations=perturbations, observe=observe,
+            perturbations=perturbations, observe=observe, forecaster=forecaster, forecast_days=forecast_days,
         ))  # fmt: skip
         m = len(self.stations)
         self.action_space = gymnasium.spaces.Discrete(m)

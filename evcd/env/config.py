@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from evcd.env.observation import OPTIONS
+from evcd.forecast.forecasters import FORECASTERS, SETTINGS
 from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.scenario import JURONG_WEST, Scenario, load_scenario
 from evcd.sim.perturbations import Perturbations
@@ -50,6 +51,8 @@ class EnvConfig:
     gui: bool = False
     perturbations: Perturbations | Mapping[str, Any] | None = None
     observe: Sequence[str] = ()
+    forecaster: str | Mapping[str, Any] = "history"
+    forecast_days: Sequence[int] | None = None
     demand_config: DemandConfig = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -105,6 +108,21 @@ class EnvConfig:
                 f"{', '.join(OPTIONS)}"
             )
         object.__setattr__(self, "observe", tuple(o for o in OPTIONS if o in self.observe))
+        object.__setattr__(self, "forecaster", forecaster_setting(self.forecaster))
+        if "forecast" in self.observe and self.forecaster["name"] == "oracle" and self.protocol != "fast":
+            raise ValueError("forecaster=oracle reads the played day's snapshots: it needs protocol='fast'")
+        if self.forecast_days is not None:
+            days = tuple(self.forecast_days)
+            if not days or not all(is_integer(s) and s >= 0 for s in days):
+                raise ValueError(
+                    f"forecast_days={self.forecast_days!r}: must be a non-empty list of demand seeds >= 0"
+                )
+            object.__setattr__(self, "forecast_days", tuple(int(s) for s in days))
+        elif "forecast" in self.observe and self.forecaster["name"] == "history":
+            raise ValueError(
+                "forecaster=history needs training days: forecast_days=[...] (the demand seeds of the days "
+                "it may learn from; the scripts give it their training days)"
+            )
 
     def _demand_config(self) -> DemandConfig:
         demand = self.demand
@@ -141,6 +159,16 @@ class EnvConfig:
                 for seed in self.demand_seeds]  # fmt: skip
         return scenario, days
 
+    def history_days(self, scenario: Scenario) -> list[DaySpec]:
+        """The days the history forecaster is fitted on (``forecast_days``: the training days)."""
+        if self.forecast_days is None:
+            return []
+        if self.route_file is not None:  # the route file is the only day there is
+            return self.load()[1]
+        return [DaySpec(scenario, self.demand_config, seed, step_length=self.step_length,
+                        time_to_teleport=self.time_to_teleport, **self._events(scenario, seed))
+                for seed in self.forecast_days]  # fmt: skip
+
     def _events(self, scenario: Scenario, seed: int) -> dict[str, Any]:
         """The perturbations of the day of ``seed``, drawn from it (:mod:`evcd.sim.perturbations`)."""
         p = self.perturbations
@@ -148,3 +176,20 @@ class EnvConfig:
         if p.on_roads:
             events["roads"] = p.roads_of(scenario.net, self.demand_config.hourly_profile, seed)
         return events
+
+
+def forecaster_setting(value: str | Mapping[str, Any]) -> dict[str, Any]:
+    """``forecaster`` as ``{"name": ..., settings...}`` (a name alone, or a mapping with ``name``).
+
+    Raises:
+        ValueError: an unknown forecaster or setting (naming the allowed ones).
+    """
+    spec = {"name": value} if isinstance(value, str) else dict(value)
+    name = spec.get("name")
+    if name not in FORECASTERS:
+        raise ValueError(f"forecaster={value!r}: the forecasters are {', '.join(FORECASTERS)}")
+    allowed = [k for k in SETTINGS[name] if k != "day"]
+    unknown = sorted(set(spec) - {"name", *allowed})
+    if unknown:
+        raise ValueError(f"forecaster {name!r}: unknown setting {unknown[0]!r}; it takes {allowed or 'none'}")
+    return spec

@@ -28,20 +28,23 @@ blocks after these, in this order:
   car just inserted), the target's own edge at its limit (its own speed is not the road's), the
   first and last edges counted for the part of them driven. 0 where the target waits;
   :data:`UNREACHABLE_S` without a route.
+- ``F[i]`` (``forecast``): the forecast number of vehicles at station ``i`` (charging and waiting)
+  when the target would get there, now plus ``T[i]`` (at most :data:`FORECAST_HORIZON_S` ahead),
+  from the environment's forecaster (:mod:`evcd.forecast`, :mod:`evcd.env.forecast_source`).
 
 A *layout* names the blocks of a vector in order, one letter each: ``"DNZ"`` (this environment),
 ``"DNZH"`` (the fleet's, :mod:`evcd.env.fleet`), then the options' letters (e.g. ``"DNZP"``,
 ``"DNZHPT"``); :func:`check_layout` says which are valid.
 
 With normalisation, ``D`` is in km, ``N`` in tens of vehicles, ``Z`` (and ``H``, ``P``) in multiples of
-the station's charging points (``Z``: 1 = all points busy, above 1 = a queue; ``P``: 1 = all in
+the station's charging points (``Z``, ``F``: 1 = all points busy, above 1 = a queue; ``P``: 1 = all in
 service) and ``T`` in minutes.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -68,7 +71,9 @@ FLOOR_SHARE = 0.1
 #: The base layouts: the single environment's and the fleet's.
 BASE_LAYOUTS = ("DNZ", "DNZH")
 #: Observation options (``EnvConfig.observe``) and their blocks, in the order the blocks follow the base.
-OPTIONS: dict[str, str] = {"points_in_service": "P", "route_time": "T"}
+OPTIONS: dict[str, str] = {"points_in_service": "P", "route_time": "T", "forecast": "F"}
+#: Latest arrival a forecast is asked for, after now (s): beyond an episode's longest trip.
+FORECAST_HORIZON_S = 7200.0
 
 
 def check_layout(layout: str | int) -> str:
@@ -158,6 +163,7 @@ def observation_bounds(
         "D": np.full(m, UNREACHABLE_M), "N": np.full(m, MAX_VEHICLES), "H": np.full(m, MAX_VEHICLES),
         "Z": np.array([st.lot_capacity for st in stations], dtype=np.float64),
         "P": np.array([st.points for st in stations], dtype=np.float64), "T": np.full(m, UNREACHABLE_S),
+        "F": np.full(m, MAX_VEHICLES),
     }  # fmt: skip
     layout = check_layout(layout)
     return np.zeros(len(layout) * m, dtype=np.float32), block_vector(high, layout, stations, normalize)
@@ -171,7 +177,10 @@ class RouteObserver:
         graph: the network's drivable edges (lengths and successors).
         vtype: vehicle type the router plans for (the target's).
         normalize: scale the vector (see the module docstring).
-        observe: the observation options (:data:`OPTIONS`: ``points_in_service``, ``route_time``).
+        observe: the observation options (:data:`OPTIONS`: ``points_in_service``, ``route_time``,
+            ``forecast``).
+        forecast: with ``forecast``, ``forecast(now, arrival, controller)`` -> the forecast vehicles
+            at each station at its ``arrival`` time (a :class:`~evcd.env.forecast_source.ForecastSource`).
     """
 
     def __init__(
@@ -181,6 +190,7 @@ class RouteObserver:
         vtype: str = "ev",
         normalize: bool = False,
         observe: Sequence[str] = (),
+        forecast: Callable[[float, np.ndarray, ChargingController], np.ndarray] | None = None,
     ) -> None:
         self.stations = tuple(stations)
         self.graph = graph
@@ -192,6 +202,9 @@ class RouteObserver:
                 f"observe={list(observe)}: unknown option {unknown[0]!r}; the options: {', '.join(OPTIONS)}"
             )
         self.layout = layout_of("DNZ", observe)
+        if "F" in self.layout and forecast is None:
+            raise ValueError("observe=[forecast] needs a forecaster (ChargingNavEnv's forecaster=...)")
+        self.forecast = forecast
         self._edge_len = {st.edge: float(graph.lengths[graph.index[st.edge]]) for st in self.stations}
 
     @property
@@ -247,8 +260,14 @@ class RouteObserver:
         if "P" in self.layout:
             now = api.simulation.getTime()
             extra["P"] = np.array([controller.points_in_service(st.id, now) for st in self.stations])
-        if "T" in self.layout:
-            extra["T"] = self._route_times(api, routes, dist, pos)
+        if "T" in self.layout or "F" in self.layout:
+            times = self._route_times(api, routes, dist, pos)
+            if "T" in self.layout:
+                extra["T"] = times
+            if "F" in self.layout:
+                assert self.forecast is not None
+                now = api.simulation.getTime()
+                extra["F"] = self.forecast(now, now + np.minimum(times, FORECAST_HORIZON_S), controller)
         blocks = {"D": dist, "N": vehicles, "Z": occupancy, **extra}
         vector = block_vector(blocks, self.layout, self.stations, self.normalize)
         return Observation(dist, vehicles, occupancy, tuple(routes), vector, extra)

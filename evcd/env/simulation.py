@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from evcd.env.episode_rules import TIME_EPS
+from evcd.env.forecast_source import ForecastSource
 from evcd.scenario.scenario import Scenario
 from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SUMO_ERRORS, SumoDriver
@@ -71,6 +72,8 @@ class EpisodeSimulation:
         cache_dir: snapshot cache root (default :func:`evcd.sim.snapshots.default_cache_dir`).
         day_end: where :meth:`finish_day` stops (paper protocol).
         gui: run the episodes' simulation in ``sumo-gui`` through TraCI.
+        forecast: the observation's forecast source, prepared before SUMO starts and told each day
+            played (:mod:`evcd.env.forecast_source`).
     """
 
     def __init__(
@@ -83,8 +86,10 @@ class EpisodeSimulation:
         cache_dir: str | Path | None = None,
         day_end: float = 86_340.0,
         gui: bool = False,
+        forecast: ForecastSource | None = None,
     ) -> None:
         self.scenario = scenario
+        self.forecast = forecast
         self.caches = [DayCache(spec, cache_dir) for spec in days]
         self.protocol = protocol
         self.times = snapshot_times(window, snapshot_every)
@@ -139,6 +144,9 @@ class EpisodeSimulation:
         """Position the simulation of day ``day`` at ``time`` (s of day), controller included (with the
         day's charger outages), roads too (its incidents, rain and road works)."""
         self.prepare(day)
+        if self.forecast is not None:
+            self.forecast.prepare(self.close)
+            self.forecast.use_day(self.caches[day])
         self.controller.use_outages(self.caches[day].spec.outages)
         if self.protocol == "paper":
             self._restart(day)

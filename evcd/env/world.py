@@ -17,13 +17,14 @@ from __future__ import annotations
 from functools import cached_property
 
 from evcd.env.config import EnvConfig
+from evcd.env.forecast_source import ForecastSource
 from evcd.env.observation import RouteObserver
 from evcd.env.reward import RewardFn, reward_fn
 from evcd.env.simulation import EpisodeSimulation
 from evcd.scenario.routing import RoadGraph
 from evcd.scenario.scenario import Scenario
 from evcd.scenario.stations_file import Station
-from evcd.sim.snapshots import DaySpec
+from evcd.sim.snapshots import DayCache, DaySpec, snapshot_times
 
 
 class World:
@@ -40,10 +41,21 @@ class World:
         self.config = config
         self.scenario, self.days = config.load()
         self.reward: RewardFn = reward_fn(config.reward)
+        self.forecast = self._forecast_source() if "forecast" in config.observe else None
         self.simulation = EpisodeSimulation(
             self.scenario, self.days, config.protocol, config.departure_window, config.snapshot_every,
-            config.cache_dir, config.day_end, gui=config.gui,
+            config.cache_dir, config.day_end, gui=config.gui, forecast=self.forecast,
         )  # fmt: skip
+
+    def _forecast_source(self) -> ForecastSource:
+        """The forecast block's source: the configured forecaster, fitted on the history days."""
+        cfg = self.config
+        settings = {k: v for k, v in cfg.forecaster.items() if k != "name"}
+        history = [DayCache(spec, cfg.cache_dir) for spec in cfg.history_days(self.scenario)]
+        times = snapshot_times(cfg.departure_window, cfg.snapshot_every)
+        return ForecastSource(
+            cfg.forecaster["name"], settings, [st.id for st in self.stations], history, times
+        )
 
     @property
     def stations(self) -> tuple[Station, ...]:
@@ -60,7 +72,8 @@ class World:
         """Computes ``[D, N, Z]`` and the observation options' blocks (:mod:`evcd.env.observation`) in the
         configured units."""
         cfg = self.config
-        return RouteObserver(self.stations, self.graph, normalize=cfg.normalize_obs, observe=cfg.observe)
+        return RouteObserver(self.stations, self.graph, normalize=cfg.normalize_obs, observe=cfg.observe,
+                             forecast=self.forecast)  # fmt: skip
 
     def prepare(self) -> None:
         """Build (or verify) every background day's snapshots now instead of at first use."""

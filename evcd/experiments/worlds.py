@@ -169,4 +169,19 @@ def split_kwargs(cfg: DictConfig, split: str, seed: int) -> dict[str, Any]:
     window = OmegaConf.select(cfg, _WINDOWS[split]) if split in _WINDOWS else None
     if window is not None:
         base["departure_window"] = tuple(window)
+    if base.get("forecast_days") is None:  # the history forecaster learns from the training days
+        base["forecast_days"] = split_days(cfg, "train", seed)
     return {**base, "demand_seeds": split_days(cfg, split, seed)}
+
+
+def check_forecaster(cfg: DictConfig) -> None:
+    """Refuse the oracle forecaster: it reads the played day's future, an upper bound for analysis
+    (``scripts/evaluate.py``), never a training run or a reported result of one."""
+    if "forecast" in list(cfg.env.observe):
+        spec = cfg.env.forecaster
+        name = spec if isinstance(spec, str) else OmegaConf.select(spec, "name")
+        if name == "oracle":
+            raise ValueError(
+                "env.forecaster=oracle reads the day's own future: an upper bound for analysis with "
+                "scripts/evaluate.py, never in a training run (use history or trend)"
+            )

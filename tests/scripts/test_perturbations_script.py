@@ -132,3 +132,30 @@ def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script
                       f"hydra.run.dir={tmp_path / 'refused'}")  # fmt: skip
     log = proc.stdout + proc.stderr
     assert proc.returncode == 2 and "observe" in log, log[-2000:]
+
+
+def test_the_forecast_rule_runs_on_the_training_days_history_and_the_oracle_is_refused(
+    script_overrides, tmp_path
+):
+    """train.py with env.observe=[forecast]: the history forecaster learns from the training days
+    (the environments are given them), queue_forecast plays beside queue_aware; the oracle stops the
+    run before SUMO, and so does evaluate.py's history without forecast_days."""
+    run = tmp_path / "run"
+    proc = run_script("train.py", *script_overrides, "agent=queue_forecast", "env.observe=[forecast]",
+                      "eval.episodes=3", "eval.baselines=[queue_aware]", f"hydra.run.dir={run}")  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    data = json.loads((run / "results.json").read_text())
+    assert data["agent"] == "queue_forecast" and list(data["baselines"]) == ["queue_aware"]
+    cfg = compose_config("train", *script_overrides, "env.observe=[forecast]")
+    assert split_kwargs(cfg, "eval", 0)["forecast_days"] == tuple(cfg.days.train)
+    cache = tmp_path / "cache"
+    overrides = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
+    for script, extra, needle in (
+        ("train.py", ["env.forecaster=oracle"], "env.forecaster=oracle reads the day's own future"),
+        ("evaluate.py", [], "forecaster=history needs training days: forecast_days=[...]"),
+    ):
+        proc = run_script(script, *overrides, f"env.cache_dir={cache}", "agent=queue_forecast",
+                          "env.observe=[forecast]", *extra, f"hydra.run.dir={tmp_path / script}")  # fmt: skip
+        log = proc.stdout + proc.stderr
+        assert proc.returncode == 2 and needle in log, log[-2000:]
+        assert not cache.exists()
