@@ -53,7 +53,8 @@ def inspect(cfg: DictConfig, out_dir: Path) -> dict:
     block = OmegaConf.select(cfg, "perturbations")
     perturbations = Perturbations.from_value(OmegaConf.to_container(block, resolve=True) if block else None)
     outages = perturbations.outages_of(scenario.stations, int(cfg.seed))
-    roads = perturbations.roads_of(scenario.net, demand_cfg.hourly_profile, int(cfg.seed))
+    lots = {st.lane for st in scenario.stations}  # the car parks' lanes stay open
+    roads = perturbations.roads_of(scenario.net, demand_cfg.hourly_profile, int(cfg.seed), lots)
 
     net = network_summary(scenario.net_file)
     dist = station_distance_matrix(scenario)

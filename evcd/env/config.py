@@ -174,7 +174,8 @@ class EnvConfig:
         p = self.perturbations
         events: dict[str, Any] = {"outages": p.outages_of(scenario.stations, seed)}
         if p.on_roads:
-            events["roads"] = p.roads_of(scenario.net, self.demand_config.hourly_profile, seed)
+            lots = {st.lane for st in scenario.stations}  # the car parks' lanes stay open
+            events["roads"] = p.roads_of(scenario.net, self.demand_config.hourly_profile, seed, lots)
         return events
 
 

@@ -76,7 +76,7 @@ class DaySpec:
             raise ValueError("a DaySpec needs exactly one of demand and route_file")
         object.__setattr__(self, "outages", check_outages(self.outages, self.scenario.stations))
         if not self.roads.empty:
-            check_road_events(self.roads, self.scenario.net)
+            check_road_events(self.roads, self.scenario.net, {st.lane for st in self.scenario.stations})
 
     @property
     def sumo_seed(self) -> int:

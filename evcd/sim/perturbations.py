@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -205,9 +205,16 @@ class Perturbations:
         """Whether a kind that changes the roads happens (incidents, rain, road works)."""
         return any(getattr(self, kind) is not None for kind in ("incidents", "rain", "roadworks"))
 
-    def roads_of(self, net: sumolib.net.Net, hourly_profile: Sequence[float], demand_seed: int) -> RoadEvents:
+    def roads_of(
+        self,
+        net: sumolib.net.Net,
+        hourly_profile: Sequence[float],
+        demand_seed: int,
+        keep_open: Collection[str] = (),
+    ) -> RoadEvents:
         """The incidents, rain and road works of the day of ``demand_seed`` on ``net`` (module
-        docstring); ``hourly_profile``: the day's 24 relative departures per hour."""
+        docstring); ``hourly_profile``: the day's 24 relative departures per hour; ``keep_open``: lanes
+        never closed (the stations' car parks)."""
         incidents: list[Incident] = []
         if (inc := self.incidents) is not None and inc.per_day > 0:
             rng = np.random.default_rng([int(demand_seed), _STREAMS["incidents"]])
@@ -216,7 +223,7 @@ class Perturbations:
                 edge = edges[int(rng.choice(len(edges), p=p))]
                 start = _start_by_profile(rng, hourly_profile, inc.start_window)
                 end = min(float(DAY), start + round(float(rng.uniform(*inc.minutes)) * 60.0))
-                closed = closable_lanes(net, edge, inc.lanes_closed)
+                closed = closable_lanes(net, edge, inc.lanes_closed, keep_open=keep_open)
                 incidents.append(
                     Incident(edge, start, max(end, start + 1.0), closed, inc.pass_speed_kmh / 3.6)
                 )
@@ -236,11 +243,14 @@ class Perturbations:
             sites = sorted(
                 {edges[int(rng.choice(len(edges), p=p))] for _ in range(int(rng.poisson(w.per_day)))}
             )
-            works = [RoadWork(e, w.speed_kmh / 3.6, closable_lanes(net, e, w.lanes_closed)) for e in sites]
+            works = [
+                RoadWork(e, w.speed_kmh / 3.6, closable_lanes(net, e, w.lanes_closed, keep_open=keep_open))
+                for e in sites
+            ]
         events = RoadEvents(
             tuple(sorted(incidents, key=lambda e: (e.start, e.edge))), tuple(rain), tuple(works)
         )
-        return check_road_events(events, net)
+        return check_road_events(events, net, keep_open)
 
     def outages_of(self, stations: Sequence[Station], demand_seed: int) -> tuple[Outage, ...]:
         """The charger outages of the day of ``demand_seed`` (sorted by start; none when calm)."""

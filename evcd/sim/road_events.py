@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -132,9 +132,12 @@ class RoadEvents:
         return sorted(times)
 
 
-def check_road_events(events: RoadEvents, net: sumolib.net.Net) -> RoadEvents:
+def check_road_events(
+    events: RoadEvents, net: sumolib.net.Net, keep_open: Collection[str] = ()
+) -> RoadEvents:
     """``events`` if every incident and road work is on a drivable edge of ``net`` and closes only
-    lanes :func:`closable_lanes` allows, and rain spells do not overlap.
+    lanes :func:`closable_lanes` allows (never one of ``keep_open``: the lanes of the stations' car
+    parks), and rain spells do not overlap.
 
     Raises:
         ValueError: naming the event and what is allowed.
@@ -146,12 +149,18 @@ def check_road_events(events: RoadEvents, net: sumolib.net.Net) -> RoadEvents:
         lanes = net.getEdge(e.edge).getLaneNumber()
         if any(i >= lanes for i in e.lanes):
             raise ValueError(f"{kind} on edge {e.edge!r}: lanes={list(e.lanes)}; it has lanes 0-{lanes - 1}")
+        held = sorted(i for i in e.lanes if f"{e.edge}_{i}" in keep_open)
+        if held:
+            raise ValueError(
+                f"{kind} on edge {e.edge!r}: lane {held[0]} holds a station's car park (its EVs must stop "
+                "there): it stays open"
+            )
         allowed = closable_lanes(net, e.edge, len(e.lanes), order=e.lanes)
         if allowed != e.lanes:
             raise ValueError(
                 f"{kind} on edge {e.edge!r}: closing lanes {list(e.lanes)} would leave no lane open to cars "
                 f"or cut a turn no open lane makes (vehicles turning there would be stranded); closable: "
-                f"{list(closable_lanes(net, e.edge, lanes))}"
+                f"{list(closable_lanes(net, e.edge, lanes, keep_open=keep_open))}"
             )
     spells = sorted(events.rain, key=lambda r: r.start)
     for a, b in itertools.pairwise(spells):
@@ -161,12 +170,18 @@ def check_road_events(events: RoadEvents, net: sumolib.net.Net) -> RoadEvents:
 
 
 def closable_lanes(
-    net: sumolib.net.Net, edge: str, most: int, order: Sequence[int] | None = None
+    net: sumolib.net.Net,
+    edge: str,
+    most: int,
+    order: Sequence[int] | None = None,
+    keep_open: Collection[str] = (),
 ) -> tuple[int, ...]:
     """Up to ``most`` lanes of ``edge`` that may be closed together, tried in ``order`` (default: from
-    the kerb, lane 0, outwards): a lane is closed when the lanes left open to cars are side by side
-    (none is cut off from the others: vehicles cannot change lanes across a closed one), and still
-    reach every edge the edge's car lanes reach (no turn is cut)."""
+    the kerb, lane 0, outwards): a lane is closed when it is not in ``keep_open`` (lane ids: the
+    stations' car parks, where their EVs must stop; SUMO stops the simulation otherwise, measured),
+    the lanes left open to cars are side by side (none is cut off from the others: vehicles cannot
+    change lanes across a closed one), and still reach every edge the edge's car lanes reach (no turn
+    is cut)."""
     lanes = net.getEdge(edge).getLanes()
     cars = [i for i, lane in enumerate(lanes) if lane.allows(PASSENGER)]
 
@@ -178,6 +193,8 @@ def closable_lanes(
     for i in order if order is not None else range(len(lanes)):
         if len(closed) == most:
             break
+        if f"{edge}_{i}" in keep_open:
+            continue
         rest = [j for j in cars if j != i and j not in closed]
         if rest and rest[-1] - rest[0] + 1 == len(rest) and reach(rest) == every:
             closed.append(i)

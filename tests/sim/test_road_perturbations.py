@@ -116,3 +116,27 @@ def test_an_environment_plays_its_days_road_events(grid, tmp_path):
                 done = terminated or truncated
     finally:
         env.close()
+
+
+def test_the_car_parks_lanes_stay_open(grid):
+    """Drawn incidents and road works never close a lane holding a station's car park (SUMO stops
+    the simulation when an EV cannot stop at its car park: 'is not allowed to stop on lane', met on
+    Jurong West), and a hand-given one that does is refused by name."""
+    lots = {st.lane for st in grid.stations}
+    profile = DemandConfig().hourly_profile
+    p = Perturbations.from_value({"incidents": {"per_day": 60.0}, "roadworks": {"per_day": 60.0}})
+    days = [p.roads_of(grid.net, profile, seed, lots) for seed in range(5)]
+    events = [e for day in days for e in (*day.incidents, *day.roadworks)]
+    assert any(e.edge in {st.edge for st in grid.stations} for e in events)  # the case happens
+    assert not {f"{e.edge}_{i}" for e in events for i in e.lanes} & lots
+    st = grid.stations[0]
+    index = int(st.lane.rpartition("_")[2])
+    with pytest.raises(
+        ValueError, match=rf"road works on edge '{st.edge}': lane {index} holds a station's car park"
+    ):
+        DaySpec(
+            grid,
+            DemandConfig(cars_per_day=100, evs=10),
+            5,
+            roads=RoadEvents(roadworks=(RoadWork(st.edge, lanes=(index,)),)),
+        )
