@@ -34,7 +34,7 @@ from evcd.report.figures import agent_colors, plot_results_bars, plot_validation
 from evcd.report.markdown import format_stat, markdown_table, num
 from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import SeedStat, seed_interval
-from evcd.report.sweep import Collection, ResultsError, WrongTaskError, collect
+from evcd.report.sweep import Collection, ResultsError, WrongTaskError, collect, world_label
 from evcd.report.table import GAP_RULE, validation_gaps, validation_points, validation_rule_means
 from evcd.utils.atomic import atomic_write_text
 
@@ -122,7 +122,7 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
         for e in episodes
     )
     return FleetJob(
-        regime=str(config.get("regime") or "unknown"),
+        regime=world_label(config),  # a perturbed or better-informed world is a table of its own
         agent=str(data["agent"]),
         evs=int(config["evs"]),
         guided_share=float(config["fleet"]["guided_share"]),

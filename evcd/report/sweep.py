@@ -29,6 +29,7 @@ from typing import Any, ClassVar, Protocol
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 
+from evcd.env.observation import OPTIONS
 from evcd.loops.run_files import RESULTS_JSON
 
 log = logging.getLogger(__name__)
@@ -223,6 +224,15 @@ def _days(value: Any) -> tuple[int, ...]:
     return tuple(int(d) for d in value) if isinstance(value, list | tuple) else ()
 
 
+def world_label(config: Mapping[str, Any]) -> str:
+    """A run's world: its regime, the kinds of perturbation it played, and the observation options'
+    blocks its agents saw (``"peak"`` for a calm run without them)."""
+    regime = str(config.get("regime") or "unknown")
+    kinds = sorted(k for k, v in (config.get("perturbations") or {}).items() if v is not None)
+    seen = "".join(OPTIONS[o] for o in OPTIONS if o in ((config.get("env") or {}).get("observe") or ()))
+    return regime + (f" +{'/'.join(kinds)}" if kinds else "") + (f" sees {seen}" if seen else "")
+
+
 def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
     """The :class:`JobResult` of a job's parsed ``results.json``.
 
@@ -248,7 +258,7 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
         charged = [float(e["travel_time"]) for e in episodes if int(e["day"]) == day and not e["truncated"]]
         day_means.append((day, sum(charged) / len(charged) if charged else math.nan))
     return JobResult(
-        regime=str(config.get("regime") or "unknown"),
+        regime=world_label(config),  # a perturbed or better-informed world is a table of its own
         agent=str(data["agent"]),
         evs=int(config["evs"]),
         seed=int(data["seed"]),
