@@ -269,7 +269,8 @@ class Agent(ABC):
         Args:
             obs: their observations, shape ``(k, 3m)`` (``[D, N, Z]``) or, for agents whose
                 :attr:`obs_blocks` has 4, ``(k, 4m)`` (``[D, N, Z, H]``, the guided EVs of a fleet
-                deciding at one tick, in the env's agent order).
+                deciding at one tick, in the env's agent order); with the observation options'
+                blocks after them where the environment has them (:attr:`layout`).
             episodes: each episode's state (from :meth:`new_episode`), updated in place.
             explore: whether a learning agent may explore (training); rules ignore it.
 

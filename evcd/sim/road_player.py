@@ -55,9 +55,12 @@ class RoadPlayer:
         self._speed0 = {lane: api.lane.getMaxSpeed(lane) for lane in lanes}
         closable = [f"{e.edge}_{i}" for e in (*events.incidents, *events.roadworks) for i in e.lanes]
         self._allowed0 = {lane: tuple(api.lane.getAllowed(lane)) for lane in sorted(set(closable))}
+        #: each vehicle type's own headway (its tau without rain), the types of the fresh simulation
+        #: read now, the later ones when first seen (:meth:`_headways`)
         self._tau0: dict[str, float] = {}
+        self._factor = 1.0  # the headway factor last applied
         if events.rain:
-            self._read_taus(api)
+            self._tau0 = {t: api.vehicletype.getTau(t) for t in api.vehicletype.getIDList()}
         self._changes = events.change_times()
         self._next = 0  # index of the next change time
         self._active: tuple[tuple[int, ...], tuple[int, ...]] | None = None
@@ -122,15 +125,21 @@ class RoadPlayer:
                 else:
                     api.lane.setAllowed(lane, list(allowed))
         if self.events.rain and (old is None or old[2] != headway):
-            self._read_taus(api)
-            for vtype, tau in self._tau0.items():
-                api.vehicletype.setTau(vtype, tau * headway)
+            self._headways(api, headway, loaded=force)
         self._active = active
 
-    def _read_taus(self, api: Any) -> None:
+    def _headways(self, api: Any, factor: float, loaded: bool) -> None:
+        """Every vehicle type there now at its own headway times ``factor``. A type first seen now got
+        its headway under the factor in force when it was made: the last one applied, or, after a
+        state load (``loaded``), the one of the state's time (a saved state keeps the types' headways
+        then), i.e. ``factor`` itself; its own is that divided out. A type recorded earlier but
+        gone (a loaded state without it) is skipped."""
+        made_under = factor if loaded else self._factor
         for vtype in api.vehicletype.getIDList():
-            if vtype not in self._tau0:  # a type first seen now has its own headway
-                self._tau0[vtype] = api.vehicletype.getTau(vtype)
+            if vtype not in self._tau0:
+                self._tau0[vtype] = api.vehicletype.getTau(vtype) / made_under
+            api.vehicletype.setTau(vtype, self._tau0[vtype] * factor)
+        self._factor = factor
 
     def _reroute(self, api: Any) -> None:
         """Reroute every background vehicle whose remaining route crosses an incident in force."""

@@ -227,3 +227,26 @@ def test_bad_road_events_are_refused_by_name(grid_net, line_net):
         RoadEvents.from_dict({"snow": []})
     events = RoadEvents(incidents=(Incident("b", 0.0, 60.0, lanes=(1,)),), rain=(Rain(10.0, 20.0),))
     assert RoadEvents.from_dict(events.to_dict()) == events
+
+
+def test_rain_headways_follow_types_made_during_it_and_skip_types_a_load_removed(line_net, tmp_path):
+    """A type copied during rain (from a type whose headway the rain lengthened) gets its own back
+    when the rain ends; a state loaded from before the copy, which lacks the copy, syncs without
+    touching it (SUMO: 'Vehicle type ... is not known', met in the batched engine)."""
+    routes = _flow(tmp_path / "r.rou.xml", "a", "c", period=60.0)
+    events = RoadEvents(rain=(Rain(100.0, 200.0, headway_factor=1.5),))
+    with SumoDriver(line_net, (), [routes], seed=0, warnings=False) as driver:
+        player = attach(driver, events)
+        api = driver.api
+        driver.step(until=50.0)
+        state = driver.save_state(tmp_path / "s50.xml.gz")
+        driver.step(until=150.0)
+        assert api.vehicletype.getTau("car") == pytest.approx(1.5)
+        api.vehicletype.copy("car", "copy")
+        driver.step(until=250.0)
+        assert api.vehicletype.getTau("copy") == pytest.approx(1.0) and api.vehicletype.getTau("car") == 1.0
+        driver.step(until=260.0)
+        driver.load_state(state)
+        assert player is not None
+        player.sync(api, driver.time)  # 'copy' may be gone: no error
+        assert api.vehicletype.getTau("car") == pytest.approx(1.0)
