@@ -108,7 +108,8 @@ def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script
     world, and a world without the options is refused, naming the sizes, before any episode."""
     world = [
         *script_overrides, "perturbations=mixed", "perturbations.incidents.start_window=[21600,23400]",
-        "perturbations.rain.chance=1", "perturbations.rain.start_window=[21000,22000]",
+        "perturbations.rain.chance=1", "perturbations.rain.start_window=[21700,22000]",
+        "perturbations.rain.hours=[0.1,0.2]",
         "perturbations.outages.start_window=[21600,23400]", "env.observe=[points_in_service,route_time]",
     ]  # fmt: skip
     run = tmp_path / "run"
@@ -118,6 +119,7 @@ def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script
         "eval.baselines=[queue_aware]", "eval.bootstrap_resamples=100", f"hydra.run.dir={run}",
     )  # fmt: skip
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert "SUMO error" not in proc.stdout + proc.stderr  # the roads played into every batch cleanly
     data = json.loads((run / "results.json").read_text())
     assert data["config"]["env"]["observe"] == ["points_in_service", "route_time"]
     assert (
