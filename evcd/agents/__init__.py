@@ -30,6 +30,7 @@ from evcd.agents.base import (
     Transition,
     observation_blocks,
     observation_layout,
+    observation_letters,
     observation_units,
     split_observation,
 )
@@ -80,6 +81,7 @@ __all__ = [
     "make_agent_for_env",
     "observation_blocks",
     "observation_layout",
+    "observation_letters",
     "observation_units",
     "register_agent",
     "split_observation",

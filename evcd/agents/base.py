@@ -137,10 +137,16 @@ def observation_units(env: Any) -> dict[str, Any]:
     return {"points": [st.points for st in base.stations], "normalized": bool(base.config.normalize_obs)}
 
 
-def observation_layout(env: Any) -> str:
+def observation_layout(env: Any) -> int:
+    """The number of length-``m`` blocks of ``env``'s observations: 3 (``[D, N, Z]``), 4 for the fleet's
+    ``[D, N, Z, H]``, plus one per observation option (:func:`observation_letters` names them)."""
+    return len(observation_letters(env))
+
+
+def observation_letters(env: Any) -> str:
     """The layout of ``env``'s observations (block letters: ``"DNZ"``, the fleet's ``"DNZH"``, with the
-    observation options' blocks after them): the environment's ``layout``, else read off the
-    observation space's size (3 or 4 blocks; ``"DNZ"`` for an object without a space)."""
+    observation options' blocks after them, e.g. ``"DNZPTF"``): the environment's ``layout``, else read
+    off the observation space's size (3 or 4 blocks; ``"DNZ"`` for an object without a space)."""
     layout = getattr(getattr(env, "unwrapped", env), "layout", None)
     if isinstance(layout, str):
         return check_layout(layout)
@@ -230,7 +236,7 @@ class Agent(ABC):
         if callable(space):  # PettingZoo: one space per agent
             space = space(next(iter(env.possible_agents), None))
         agent = cls(int(space.n), rng, **{**cls.env_kwargs(env), **kwargs})
-        agent.layout = observation_layout(env)
+        agent.layout = observation_letters(env)
         return agent
 
     # ------------------------------------------------------------------ acting

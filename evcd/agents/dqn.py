@@ -43,7 +43,7 @@ from evcd.agents.base import (
     Agent,
     Transition,
     layout_option,
-    observation_layout,
+    observation_letters,
     observation_units,
 )
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
@@ -146,7 +146,7 @@ class DQNAgent(Agent):
     @classmethod
     def env_kwargs(cls, env: Any) -> dict[str, Any]:
         """The env's charging points, whether it normalises, and its observation's blocks (3 or 4)."""
-        return {**observation_units(env), "obs_blocks": observation_layout(env)}
+        return {**observation_units(env), "obs_blocks": observation_letters(env)}
 
     @classmethod
     def option_names(cls) -> list[str]:

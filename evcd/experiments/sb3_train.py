@@ -32,7 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm.auto import tqdm
 
-from evcd.agents.base import Agent, EpisodeState, observation_layout, observation_units
+from evcd.agents.base import Agent, EpisodeState, observation_letters, observation_units
 from evcd.env.charging_nav import ChargingNavEnv
 from evcd.env.observation import unit_divisors
 from evcd.env.sweep import SweepVectorEnv
@@ -274,7 +274,7 @@ class SB3Policy(Agent):
     def for_env(cls, env: Any, model: Any, label: str) -> SB3Policy:
         """This policy for playing in ``env`` (its stations and observation units)."""
         units = observation_units(env)
-        layout = observation_layout(env)
+        layout = observation_letters(env)
         return cls(model, len(units["points"]), units["points"], units["normalized"], label, layout=layout)
 
     def decide(self, obs: np.ndarray, episodes: Sequence[EpisodeState], explore: bool = False) -> np.ndarray:
