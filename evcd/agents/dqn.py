@@ -108,9 +108,9 @@ class DQNAgent(Agent):
         self.obs_dim = self.blocks * self.n_stations
         if self.config.in_turn and "H" not in self.layout:
             raise ValueError(
-                f"in_turn=True with obs_blocks={obs_blocks!r}: in_turn is the fleet's (task=fleet, "
-                "[D, N, Z, H]: the EVs of one tick decide one after the other); the single "
-                "environment has one EV (in_turn=false)"
+                f"in_turn=True with observations {self.layout} ({self.blocks} blocks): in_turn is the "
+                "fleet's (task=fleet, [D, N, Z, H]: the EVs of one tick decide one after the other); the "
+                "single environment has one EV (in_turn=false)"
             )
         self.normalized = check_bool("normalized", normalized)
         self._divisors = observation_divisors(points, self.n_stations, self.layout, self.normalized)

@@ -164,7 +164,7 @@ def test_one_ev_alone_decides_and_stores_as_side_by_side() -> None:
 
 
 def test_in_turn_is_the_fleets_and_a_checkpoint_keeps_it(tmp_path) -> None:
-    with pytest.raises(ValueError, match=r"in_turn=True with obs_blocks=3.*task=fleet"):
+    with pytest.raises(ValueError, match=r"in_turn=True with observations DNZ \(3 blocks\).*task=fleet"):
         make_agent("dqn", M, np.random.default_rng(0), in_turn=True, **SMALL)
     with pytest.raises(ValueError, match="in_turn"):
         _agent(in_turn="yes")

@@ -364,7 +364,7 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("learner.hidden=[]", "hidden=[]"),
         ("learner.epsilon_start=1.5", "epsilon_start=1.5"),
         ("learner.loss=l1", "loss='l1'"),
-        ("learner.in_turn=true", "in_turn=True with obs_blocks=3: in_turn is the fleet's"),
+        ("learner.in_turn=true", "in_turn=True with observations DNZ (3 blocks): in_turn is the fleet's"),
         ("eval.episodes=0", "eval.episodes=0"),
         ("agent.name=dqnn", "dqnn"),
         ("evs=-1", "evs=-1"),
