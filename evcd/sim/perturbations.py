@@ -73,19 +73,11 @@ class OutageSettings:
     def __post_init__(self) -> None:
         check_real("perturbations.outages.per_day", self.per_day, low=0.0, high=100.0)
         check_int("perturbations.outages.points", self.points, minimum=1)
-        lo, hi = _pair("perturbations.outages.minutes", self.minutes)
-        if not 1.0 <= lo <= hi <= 24 * 60:
-            raise ValueError(
-                f"perturbations.outages.minutes={list(self.minutes)}: need 1 <= low <= high <= 1440 (minutes)"
-            )
-        s0, s1 = _pair("perturbations.outages.start_window", self.start_window)
-        if not 0.0 <= s0 < s1 <= DAY:
-            raise ValueError(
-                f"perturbations.outages.start_window={list(self.start_window)}: need 0 <= "
-                f"start < end <= {DAY} (s of day)"
-            )
-        object.__setattr__(self, "minutes", (lo, hi))
-        object.__setattr__(self, "start_window", (s0, s1))
+        minutes = _range("perturbations.outages.minutes", self.minutes, 1.0, 24 * 60, "minutes")
+        object.__setattr__(self, "minutes", minutes)
+        object.__setattr__(
+            self, "start_window", _window("perturbations.outages.start_window", self.start_window)
+        )
 
 
 def _window(name: str, value: Any) -> tuple[float, float]:
