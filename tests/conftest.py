@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -290,6 +290,18 @@ def run_script(
     """``python scripts/<script> args...`` as a user runs it (or ``python -c code args...``)."""
     cmd = [sys.executable, "-c", code] if code is not None else [sys.executable, str(SCRIPTS / script)]
     return subprocess.run([*cmd, *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+def run_refused(script: str, overrides: Sequence[str], *args: str, cache: Path) -> str:
+    """Run ``script`` with settings it must refuse before SUMO starts: on its own snapshot cache
+    ``cache`` (in place of the overrides' ``env.cache_dir``) it exits with code 2 and simulates no day
+    (``cache`` is never made). Returns its output (stdout + stderr) for the message."""
+    kept = [o for o in overrides if not o.startswith("env.cache_dir=")]
+    proc = run_script(script, *kept, f"env.cache_dir={cache}", *args)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 2, log[-2000:]
+    assert not cache.exists()  # no day was simulated
+    return log
 
 
 def compose_config(config_name: str, *overrides: str, return_hydra_config: bool = False) -> DictConfig:
