@@ -58,6 +58,7 @@ class ForecastSource:
         self.history_days = list(history_days)
         self.times = list(times)
         self._forecaster: Forecaster | None = None
+        self._today: OccupancyTimeline | None = None  # the current day up to the last time asked
 
     def prepare(self, close: Callable[[], None]) -> None:
         """Fit the history forecaster once (building its days' snapshots where missing, after
@@ -76,6 +77,7 @@ class ForecastSource:
 
     def use_day(self, cache: DayCache) -> None:
         """The day about to be played (its snapshots ensured): the oracle's future."""
+        self._today = None
         if self.name == "oracle":
             self._forecaster = make_forecaster("oracle", day=day_timeline(cache, self.times, self.stations))
 
@@ -83,7 +85,10 @@ class ForecastSource:
         """The forecast vehicles at each station at its ``arrival`` time (s of day, >= ``now``)."""
         if self._forecaster is None:
             raise RuntimeError("the forecast source is not prepared (EpisodeSimulation.start_at does it)")
-        # the history and the oracle do not read today's counts: an empty day known up to now
-        records = controller.records if self.name == "trend" else []
-        today = OccupancyTimeline.from_records(records, self.stations, known_until=now)
+        # the history and the oracle do not read today's counts: an empty day known up to now. One
+        # timeline per simulation time: every target deciding at a tick shares it.
+        if self._today is None or self._today.known_until != now:
+            records = controller.records if self.name == "trend" else []
+            self._today = OccupancyTimeline.from_records(records, self.stations, known_until=now)
+        today = self._today
         return self._forecaster.forecast(now, np.maximum(arrival, now), today)
