@@ -105,10 +105,11 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
             observation's layout is :attr:`layout` (e.g. ``"DNZP"``).
         forecaster: what ``F`` comes from (:mod:`evcd.forecast`): ``"history"`` (per station and time
             of day, the mean of ``forecast_days``), ``"trend"`` (a line through the current day's last
-            15 min) or ``"oracle"`` (the day's own future: analysis only), or a mapping with ``name``
-            and its settings (``bin_s``, ``window_s``, ``sample_s``).
-        forecast_days: the demand seeds of the days the history forecaster learns from (the scripts
-            give it their training days); the history forecaster refuses to run without them.
+            15 min), ``"anomaly"`` (the history plus today's deviation from it now, fading with the
+            horizon) or ``"oracle"`` (the day's own future: analysis only), or a mapping with
+            ``name`` and its settings (``bin_s``, ``window_s``, ``sample_s``, ``max_lag_s``).
+        forecast_days: the demand seeds of the days the history and anomaly forecasters learn from
+            (the scripts give them their training days); those forecasters refuse to run without them.
 
     Every invalid argument raises ``ValueError`` naming it before SUMO starts. The seed is given
     through ``reset(seed=...)``: one generator drives the day, the departure, the origin and the

@@ -118,10 +118,10 @@ class EnvConfig:
                     f"forecast_days={self.forecast_days!r}: must be a non-empty list of demand seeds >= 0"
                 )
             object.__setattr__(self, "forecast_days", tuple(int(s) for s in days))
-        elif "forecast" in self.observe and self.forecaster["name"] == "history":
+        elif "forecast" in self.observe and FORECASTERS[self.forecaster["name"]].needs_days:
             raise ValueError(
-                "forecaster=history needs training days: forecast_days=[...] (the demand seeds of the days "
-                "it may learn from; the scripts give it their training days)"
+                f"forecaster={self.forecaster['name']} needs training days: forecast_days=[...] (the "
+                "demand seeds of the days it may learn from; the scripts give it their training days)"
             )
 
     def _demand_config(self) -> DemandConfig:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from evcd.forecast import Forecaster, OccupancyTimeline, make_forecaster
+from evcd.forecast import FORECASTERS, Forecaster, OccupancyTimeline, make_forecaster
 from evcd.sim.charging import ChargingController
 from evcd.sim.snapshots import DayCache
 
@@ -37,10 +37,10 @@ class ForecastSource:
     """The forecast of the vehicles at each station at an EV's arrival (module docstring).
 
     Args:
-        name: ``"history"``, ``"trend"`` or ``"oracle"``.
-        settings: the forecaster's settings (``bin_s``, ``window_s``, ``sample_s``).
+        name: ``"history"``, ``"trend"``, ``"anomaly"`` or ``"oracle"``.
+        settings: the forecaster's settings (``bin_s``, ``window_s``, ``sample_s``, ``max_lag_s``).
         stations: the station ids, in action order.
-        history_days: the days the history forecaster is fitted on (the training days).
+        history_days: the days the history and anomaly forecasters are fitted on (the training days).
         times: the snapshot times the days are built at (the environment's).
     """
 
@@ -61,17 +61,17 @@ class ForecastSource:
         self._today: OccupancyTimeline | None = None  # the current day up to the last time asked
 
     def prepare(self, close: Callable[[], None]) -> None:
-        """Fit the history forecaster once (building its days' snapshots where missing, after
-        ``close`` freed this process's libsumo); the trend needs nothing."""
+        """Fit a forecaster that learns from past days once (building their snapshots where missing,
+        after ``close`` freed this process's libsumo); the trend needs nothing."""
         if self._forecaster is not None or self.name == "oracle":
             return
-        if self.name == "history":
+        if FORECASTERS[self.name].needs_days:
             timelines = []
             for cache in self.history_days:
                 if not cache.has(self.times):
                     close()
                 timelines.append(day_timeline(cache, self.times, self.stations))
-            self._forecaster = make_forecaster("history", timelines, **self.settings)
+            self._forecaster = make_forecaster(self.name, timelines, **self.settings)
         else:
             self._forecaster = make_forecaster(self.name, **self.settings)
 
@@ -88,7 +88,7 @@ class ForecastSource:
         # the history and the oracle do not read today's counts: an empty day known up to now. One
         # timeline per simulation time: every target deciding at a tick shares it.
         if self._today is None or self._today.known_until != now:
-            records = controller.records if self.name == "trend" else []
+            records = controller.records if FORECASTERS[self.name].reads_today else []
             self._today = OccupancyTimeline.from_records(records, self.stations, known_until=now)
         today = self._today
         return self._forecaster.forecast(now, np.maximum(arrival, now), today)

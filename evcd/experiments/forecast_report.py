@@ -5,7 +5,7 @@ For every evaluation day (its snapshots built over the departure window), every 
 the window (each ``every_s``) and every horizon (5-20 min by default), each forecaster's forecast of
 the vehicles at each station at the time plus the horizon is compared with what the day's records
 say happened: the mean absolute error by station and hour (:func:`evcd.forecast.forecast_errors`).
-The history forecaster learns from the training days only; the trend reads each day up to the
+The history and anomaly forecasters learn from the training days only; the trend reads each day up to the
 decision time; the oracle reads the day itself (its error is 0 where the records reach: a check,
 not a forecaster one could run). The reference ``now`` is no forecast at all: the vehicles there at
 the decision time (what ``queue_aware`` reads, the trend over a window of 0 s).
@@ -18,7 +18,7 @@ from typing import Any
 
 from evcd.env.config import EnvConfig
 from evcd.env.forecast_source import day_timeline
-from evcd.forecast import OccupancyTimeline, forecast_errors, make_forecaster
+from evcd.forecast import FORECASTERS, OccupancyTimeline, forecast_errors, make_forecaster
 from evcd.sim.snapshots import DayCache, snapshot_times
 
 
@@ -38,13 +38,13 @@ def forecaster_errors(
     train: Sequence[OccupancyTimeline],
     held_out: Sequence[OccupancyTimeline],
     window: tuple[float, float],
-    names: Sequence[str] = ("history", "trend", "oracle"),
+    names: Sequence[str] = ("history", "trend", "anomaly", "oracle"),
     horizons_s: Sequence[float] = (300.0, 600.0, 900.0, 1200.0),
     every_s: float = 60.0,
 ) -> dict[str, list[dict[str, Any]]]:
     """Per forecaster name, the rows ``{station, hour, mae, n}`` on the ``held_out`` days (the history
-    fitted on ``train``; the oracle made for each day in turn, its rows pooled), and under ``now``
-    the reference of the vehicles there at the decision time."""
+    and the anomaly fitted on ``train``; the oracle made for each day in turn, its rows pooled), and
+    under ``now`` the reference of the vehicles there at the decision time."""
     now = make_forecaster("trend", window_s=0.0)
     out: dict[str, list[dict[str, Any]]] = {
         "now": forecast_errors(now, held_out, window, horizons_s, every_s)
@@ -55,7 +55,8 @@ def forecaster_errors(
                        for d in held_out]  # fmt: skip
             out[name] = pool_rows([r for rows in per_day for r in rows])
         else:
-            forecaster = make_forecaster(name, train) if name == "history" else make_forecaster(name)
+            days = train if FORECASTERS[name].needs_days else ()
+            forecaster = make_forecaster(name, days)
             out[name] = forecast_errors(forecaster, held_out, window, horizons_s, every_s)
     return out
 

@@ -2,9 +2,9 @@
 
 - :class:`OccupancyTimeline` (:mod:`~evcd.forecast.timeline`): vehicles at each station over time,
   from the controller's visit records, known up to the time they were read;
-- :class:`Forecaster` and its :class:`HistoryForecaster`, :class:`TrendForecaster` and
-  :class:`OracleForecaster` (:mod:`~evcd.forecast.forecasters`), made by name with
-  :func:`make_forecaster`;
+- :class:`Forecaster` and its :class:`HistoryForecaster`, :class:`TrendForecaster`,
+  :class:`AnomalyForecaster` and :class:`OracleForecaster` (:mod:`~evcd.forecast.forecasters`), made
+  by name with :func:`make_forecaster`;
 - :func:`forecast_errors` and :func:`format_mae_table` (:mod:`~evcd.forecast.errors`): a forecaster's
   mean absolute error per station and hour on played days.
 """
@@ -14,6 +14,7 @@ from __future__ import annotations
 from evcd.forecast.errors import forecast_errors, format_mae_table
 from evcd.forecast.forecasters import (
     FORECASTERS,
+    AnomalyForecaster,
     Forecaster,
     HistoryForecaster,
     OracleForecaster,
@@ -24,6 +25,7 @@ from evcd.forecast.timeline import OccupancyTimeline
 
 __all__ = [
     "FORECASTERS",
+    "AnomalyForecaster",
     "Forecaster",
     "HistoryForecaster",
     "OccupancyTimeline",

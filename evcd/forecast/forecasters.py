@@ -6,6 +6,8 @@ station and the current day's :class:`~evcd.forecast.timeline.OccupancyTimeline`
 
 - :class:`HistoryForecaster`: the mean occupancy of past days in the arrival's time-of-day bin;
 - :class:`TrendForecaster`: a straight line through the current day's last minutes;
+- :class:`AnomalyForecaster`: the history plus today's deviation from it now, shrunk with the horizon
+  as the deviations of the training days decayed;
 - :class:`OracleForecaster`: the day's own future, an upper bound for analysis only.
 
     forecaster = make_forecaster("history", training_days=past_days, bin_s=900.0)
@@ -28,6 +30,14 @@ from evcd.utils.validation import check_choice, check_real, require
 SAMPLE_S = 60.0
 
 
+def sample_times(known_until: float, sample_s: float) -> np.ndarray:
+    """The times ``0, sample_s, 2 sample_s, ...`` up to ``known_until`` (none where it is < 0)."""
+    if known_until < 0:
+        return np.empty(0)
+    times = sample_s * np.arange(math.floor(known_until / sample_s + 1e-9) + 1)
+    return times[times <= known_until]
+
+
 def _same_stations(stations: tuple[str, ...], today: OccupancyTimeline, owner: str) -> None:
     require(
         today.stations == stations,
@@ -43,6 +53,10 @@ class Forecaster(ABC):
     """
 
     name: ClassVar[str]
+    #: whether it is fitted on past days (``make_forecaster(name, training_days)``)
+    needs_days: ClassVar[bool] = False
+    #: whether it reads the current day's counts up to now (else ``today`` only gives ``now``'s bounds)
+    reads_today: ClassVar[bool] = False
 
     def forecast(
         self, now: float, arrival: Sequence[float] | np.ndarray, today: OccupancyTimeline
@@ -101,6 +115,7 @@ class HistoryForecaster(Forecaster):
     """
 
     name: ClassVar[str] = "history"
+    needs_days: ClassVar[bool] = True
 
     def __init__(self, bin_s: float = 900.0, sample_s: float = SAMPLE_S) -> None:
         self.bin_s = check_real("bin_s", bin_s, low=0.0, low_open=True)
@@ -130,10 +145,9 @@ class HistoryForecaster(Forecaster):
         sums = np.zeros((n_bins, len(stations)))
         counts = np.zeros(n_bins, dtype=np.int64)
         for day in days:
-            if day.known_until < 0:
+            times = sample_times(day.known_until, self.sample_s)
+            if not times.size:
                 continue
-            times = self.sample_s * np.arange(math.floor(day.known_until / self.sample_s + 1e-9) + 1)
-            times = times[times <= day.known_until]
             bins = np.floor(times / self.bin_s).astype(np.int64)
             np.add.at(sums, bins, day.at(times))
             counts += np.bincount(bins, minlength=n_bins)
@@ -182,6 +196,7 @@ class TrendForecaster(Forecaster):
     """
 
     name: ClassVar[str] = "trend"
+    reads_today: ClassVar[bool] = True
 
     def __init__(self, window_s: float = 900.0, sample_s: float = SAMPLE_S) -> None:
         self.window_s = check_real("window_s", window_s, low=0.0)
@@ -198,6 +213,78 @@ class TrendForecaster(Forecaster):
         slope = dx @ (y - y.mean(axis=0)) / (dx @ dx)
         line = y.mean(axis=0) + slope * (arrival - now - x.mean())
         return np.maximum(line, 0.0)
+
+
+class AnomalyForecaster(Forecaster):
+    """The history's forecast plus today's deviation from the history now, shrunk with the horizon as
+    the training days' deviations faded (climatology plus damped persistence).
+
+    ``forecast = max(0, history(arrival) + beta(arrival - now) * (today(now) - history(now)))``: at a
+    horizon of 0 it is the vehicles there now; far ahead, the history. ``beta(h)`` is fitted on the
+    training days at the lags ``0, sample_s, ...`` up to ``max_lag_s``: the least-squares coefficient of
+    a day's deviation ``h`` seconds later on its deviation at a time, pooled over every sample and
+    station, ``sum a(t) a(t + h) / sum a(t)^2``, clipped to ``[0, 1]`` (``beta(0) = 1``). A day's
+    deviations are taken from the history fitted on the *other* training days (on the day itself when
+    only one is given), so that a day's own counts do not shrink them. Between lags ``beta`` is
+    linear; beyond ``max_lag_s`` it is 0 (the history alone).
+
+    Args:
+        bin_s: the history's time-of-day bin (s), > 0.
+        sample_s: seconds between two samples of a day, > 0.
+        max_lag_s: the longest horizon the deviation is carried to (s), >= 0.
+    """
+
+    name: ClassVar[str] = "anomaly"
+    needs_days: ClassVar[bool] = True
+    reads_today: ClassVar[bool] = True
+
+    def __init__(self, bin_s: float = 900.0, sample_s: float = SAMPLE_S, max_lag_s: float = 7200.0) -> None:
+        self.history = HistoryForecaster(bin_s, sample_s)
+        self.max_lag_s = check_real("max_lag_s", max_lag_s, low=0.0)
+        self.lags = np.zeros(1)
+        self.beta = np.ones(1)
+
+    @property
+    def stations(self) -> tuple[str, ...] | None:
+        """The stations of the training days (None before :meth:`fit`)."""
+        return self.history.stations
+
+    def fit(self, days: Sequence[OccupancyTimeline]) -> AnomalyForecaster:
+        """Fit the history on ``days`` and ``beta`` on their deviations; returns self.
+
+        Raises:
+            ValueError: as :meth:`HistoryForecaster.fit`.
+        """
+        days = list(days)
+        self.history.fit(days)
+        sample_s = self.history.sample_s
+        k_max = math.floor(self.max_lag_s / sample_s + 1e-9)
+        num = np.zeros(k_max + 1)
+        den = np.zeros(k_max + 1)
+        for i, day in enumerate(days):
+            times = sample_times(day.known_until, sample_s)
+            if times.size < 1:
+                continue
+            others = [d for j, d in enumerate(days) if j != i and d.known_until >= 0] or [day]
+            reference = HistoryForecaster(self.history.bin_s, sample_s).fit(others)
+            m = len(day.stations)
+            expected = reference._predict(0.0, np.repeat(times[:, None], m, axis=1), day)
+            dev = day.at(times) - expected  # (n, m)
+            for k in range(min(k_max, len(times) - 1) + 1):
+                num[k] += float((dev[: len(times) - k] * dev[k:]).sum())
+                den[k] += float((dev[: len(times) - k] ** 2).sum())
+        with np.errstate(invalid="ignore", divide="ignore"):
+            beta = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+        self.lags = sample_s * np.arange(k_max + 1)
+        self.beta = np.clip(beta, 0.0, 1.0)
+        return self
+
+    def _predict(self, now: float, arrival: np.ndarray, today: OccupancyTimeline) -> np.ndarray:
+        m = arrival.shape[1]
+        expected = self.history._predict(now, arrival, today)
+        deviation = today.at(now) - self.history._predict(now, np.full((1, m), now), today)[0]
+        beta = np.interp(arrival - now, self.lags, self.beta, right=0.0)
+        return np.maximum(expected + beta * deviation, 0.0)
 
 
 class OracleForecaster(Forecaster):
@@ -223,12 +310,13 @@ class OracleForecaster(Forecaster):
 
 
 FORECASTERS: dict[str, type[Forecaster]] = {
-    f.name: f for f in (HistoryForecaster, TrendForecaster, OracleForecaster)
+    f.name: f for f in (HistoryForecaster, TrendForecaster, AnomalyForecaster, OracleForecaster)
 }
 #: The settings each forecaster takes by name.
 SETTINGS: dict[str, tuple[str, ...]] = {
     "history": ("bin_s", "sample_s"),
     "trend": ("window_s", "sample_s"),
+    "anomaly": ("bin_s", "sample_s", "max_lag_s"),
     "oracle": ("day",),
 }
 
@@ -236,22 +324,23 @@ SETTINGS: dict[str, tuple[str, ...]] = {
 def make_forecaster(
     name: str, training_days: Sequence[OccupancyTimeline] = (), **settings: Any
 ) -> Forecaster:
-    """A forecaster by name: ``"history"`` (fitted on ``training_days``), ``"trend"`` or ``"oracle"``
-    (needs ``day=`` the played day's timeline); ``settings`` go to its constructor.
+    """A forecaster by name: ``"history"`` or ``"anomaly"`` (fitted on ``training_days``), ``"trend"``
+    or ``"oracle"`` (needs ``day=`` the played day's timeline); ``settings`` go to its constructor.
 
     Raises:
-        ValueError: an unknown name or setting (listing the allowed ones), ``"history"`` without
-            training days, ``"oracle"`` without ``day``.
+        ValueError: an unknown name or setting (listing the allowed ones), ``"history"`` or
+            ``"anomaly"`` without training days, ``"oracle"`` without ``day``.
     """
     check_choice("forecaster", name, tuple(FORECASTERS))
     unknown = sorted(set(settings) - set(SETTINGS[name]))
     require(not unknown, f"settings {unknown} for the {name} forecaster: it takes {list(SETTINGS[name])}")
-    if name == "history":
+    cls = FORECASTERS[name]
+    if cls.needs_days:
         require(
             len(training_days) > 0,
-            "the history forecaster needs training days (timelines of past days); none were given",
+            f"the {name} forecaster needs training days (timelines of past days); none were given",
         )
-        return HistoryForecaster(**settings).fit(training_days)
+        return cls(**settings).fit(training_days)  # type: ignore[attr-defined]
     if name == "oracle":
         require("day" in settings, "the oracle forecaster needs day= the timeline of the day it plays")
-    return FORECASTERS[name](**settings)
+    return cls(**settings)

@@ -73,6 +73,22 @@ def test_the_trend_reads_todays_records_up_to_now(make_env):
     np.testing.assert_allclose(env.last_observation.extra["F"], expected)
 
 
+def test_the_anomaly_learns_from_the_forecast_days_and_reads_todays_records_up_to_now(make_env, env_cache):
+    env = make_env(observe=OBSERVE, forecaster={"name": "anomaly", "bin_s": 600}, forecast_days=(3, 4))
+    env.reset(seed=2)
+    now, arrival = _arrival(env)
+    ids = [st.id for st in env.stations]
+    history = [DayCache(spec, env_cache) for spec in env.config.history_days(env.scenario)]
+    fitted = make_forecaster("anomaly", [day_timeline(c, _times(env), ids) for c in history], bin_s=600)
+    today = OccupancyTimeline.from_records(env.simulation.controller.records, ids, known_until=now)
+    expected = fitted.forecast(now, arrival, today)
+    np.testing.assert_allclose(env.last_observation.extra["F"], expected)
+    # today's counts matter: with an empty day the forecast would be another
+    empty = OccupancyTimeline.from_records([], ids, known_until=now)
+    assert today.at(now).sum() > 0
+    assert not np.allclose(fitted.forecast(now, arrival, empty), expected)
+
+
 def test_queue_forecast_counts_the_forecast_queue():
     """cs0 is nearer and empty now, but 4 vehicles are forecast there at arrival (2 points): the
     forecast rule goes to cs1; queue_aware, reading the queue now, to cs0."""
@@ -101,8 +117,12 @@ def test_the_forecast_rule_plays_an_episode(make_env):
     [
         ({"observe": ["forecast"]}, "forecaster=history needs training days: forecast_days=[...]"),
         (
+            {"observe": ["forecast"], "forecaster": "anomaly"},
+            "forecaster=anomaly needs training days: forecast_days=[...]",
+        ),
+        (
             {"observe": ["forecast"], "forecaster": "crystal_ball"},
-            "the forecasters are history, trend, oracle",
+            "the forecasters are history, trend, anomaly, oracle",
         ),
         ({"observe": ["forecast"], "forecaster": {"name": "trend", "bin_s": 5}}, "unknown setting 'bin_s'"),
         ({"observe": ["forecast"], "forecaster": "trend", "forecast_days": []}, "forecast_days=[]"),

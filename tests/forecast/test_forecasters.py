@@ -1,4 +1,4 @@
-"""The forecasters (history, trend, oracle), make_forecaster and the error table, every value
+"""The forecasters (history, trend, anomaly, oracle), make_forecaster and the error table, every value
 hand-computed on toy days of a few visits."""
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from evcd.forecast import (
+    AnomalyForecaster,
     Forecaster,
     HistoryForecaster,
     OccupancyTimeline,
@@ -72,6 +73,50 @@ def test_a_history_forecaster_needs_training_days():
         fitted.forecast(0.0, [10.0, 10.0], day([], 100.0, stations=("b", "a")))
     with pytest.raises(ValueError, match="bin_s=0"):
         HistoryForecaster(bin_s=0.0)
+
+
+# ------------------------------------------------------------------------------------------ anomaly
+#: One station, samples every 60 s over [0, 240], one bin. Day A: a vehicle over [0, 120): 1 1 0 0 0
+#: (mean 0.4); day B: one from 120: 0 0 1 1 1 (mean 0.6). Each day's deviations are from the OTHER
+#: day's mean: A 0.4 0.4 -0.6 -0.6 -0.6, B -0.4 -0.4 0.6 0.6 0.6.
+#: beta(0) = 1; beta(60) = 2 x (.16 - .24 + .36 + .36) / 2 x (.16 + .16 + .36 + .36) = 1.28 / 2.08;
+#: beta(120) = 2 x (-.24 - .24 + .36) / ... < 0 -> 0; likewise 180 and 240.
+DAY_A = day([("a", 0, 120)], 240.0, stations=("a",))
+DAY_B = day([("a", 120, None)], 240.0, stations=("a",))
+BETA_60 = 1.28 / 2.08
+
+
+def test_the_anomaly_fits_the_lag_coefficients_of_the_days_deviations_from_the_other_days():
+    anomaly = AnomalyForecaster(bin_s=1e6, max_lag_s=240.0).fit([DAY_A, DAY_B])
+    assert anomaly.lags.tolist() == [0.0, 60.0, 120.0, 180.0, 240.0]
+    assert anomaly.beta == pytest.approx([1.0, BETA_60, 0.0, 0.0, 0.0])
+    # the history is both days' mean, 0.5; today has 1 vehicle at 60: a deviation of +0.5, carried
+    # fully at horizon 0, by beta(60) at 60, linearly between, not at all from 120 or past max_lag_s
+    today = day([("a", 0, None)], 60.0, stations=("a",))
+    got = anomaly.forecast(60.0, [[60.0], [90.0], [120.0], [180.0], [400.0]], today)[:, 0]
+    assert got == pytest.approx([1.0, 0.5 + 0.5 * (1 + BETA_60) / 2, 0.5 + 0.5 * BETA_60, 0.5, 0.5])
+    # it reads today only up to now: a vehicle arriving after now changes nothing
+    later = day([("a", 0, None), ("a", 90, None)], 60.0, stations=("a",))
+    assert anomaly.forecast(60.0, [120.0], later) == pytest.approx(got[2:3])
+
+
+def test_one_training_day_gives_its_deviations_from_itself():
+    # A alone: mean 0.4, deviations 0.6 0.6 -0.4 -0.4 -0.4; beta(60) = (.36 - .24 + .16 + .16) / (.36 +
+    # .36 + .16 + .16) = .44 / 1.04
+    anomaly = AnomalyForecaster(bin_s=1e6, max_lag_s=60.0).fit([DAY_A])
+    assert anomaly.beta == pytest.approx([1.0, 0.44 / 1.04])
+    assert anomaly.stations == ("a",)
+
+
+def test_an_anomaly_forecaster_needs_training_days_and_a_lag_of_at_least_zero():
+    with pytest.raises(ValueError, match=r"the anomaly forecaster needs training days .* none were given"):
+        make_forecaster("anomaly")
+    with pytest.raises(ValueError, match="max_lag_s=-1"):
+        AnomalyForecaster(max_lag_s=-1.0)
+    with pytest.raises(ValueError, match="call fit"):
+        AnomalyForecaster().forecast(0.0, [10.0], DAY_A)
+    made = make_forecaster("anomaly", [DAY_A, DAY_B], bin_s=1e6, max_lag_s=60.0)
+    assert isinstance(made, AnomalyForecaster) and made.beta == pytest.approx([1.0, BETA_60])
 
 
 # ------------------------------------------------------------------------------------------ trend
@@ -139,7 +184,7 @@ def test_make_forecaster_makes_each_by_name_and_refuses_what_it_cannot():
     assert isinstance(trend, TrendForecaster) and trend.window_s == 300.0
     oracle = make_forecaster("oracle", day=TODAY)
     assert isinstance(oracle, OracleForecaster) and oracle.day is TODAY
-    with pytest.raises(ValueError, match="forecaster='arima': must be one of history, trend, oracle"):
+    with pytest.raises(ValueError, match="forecaster='arima': must be one of history, trend, anomaly, "):
         make_forecaster("arima")
     with pytest.raises(ValueError, match=r"needs training days .* none were given"):
         make_forecaster("history")

@@ -15,9 +15,9 @@ def test_the_forecasters_errors_on_the_held_out_days(script_overrides, tmp_path)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     data = json.loads((out / "forecast_errors.json").read_text())
     assert data["train_days"] == [0, 3] and data["evaluation_days"] == [101]
-    assert set(data["rows"]) == {"now", "history", "trend", "oracle"}
+    assert set(data["rows"]) == {"now", "history", "trend", "anomaly", "oracle"}
     assert data["overall_mae"]["oracle"] == 0.0  # the day's own records: a check of the pipeline
-    for name in ("now", "history", "trend"):
+    for name in ("now", "history", "trend", "anomaly"):
         rows = data["rows"][name]
         assert rows and all(r["mae"] >= 0 and r["n"] > 0 for r in rows)
         assert {r["hour"] for r in rows} == {6}  # decisions 06:00-06:30
@@ -25,4 +25,5 @@ def test_the_forecasters_errors_on_the_held_out_days(script_overrides, tmp_path)
     assert "## history: overall MAE" in text and "held-out" in text.lower()
     proc = run_script("forecast_errors.py", *script_overrides, "forecast.forecasters=[crystal_ball]",
                       f"hydra.run.dir={tmp_path / 'bad'}")  # fmt: skip
-    assert proc.returncode == 2 and "choose among history, trend, oracle" in proc.stdout + proc.stderr
+    assert proc.returncode == 2
+    assert "choose among history, trend, anomaly, oracle" in proc.stdout + proc.stderr

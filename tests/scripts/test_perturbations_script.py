@@ -39,6 +39,17 @@ def test_mixed_composes_every_kind_with_its_own_settings():
     )
 
 
+@pytest.mark.parametrize("kind", ["incidents", "outages", "rain"])
+def test_each_peak_kind_is_mixed_peaks_kind_alone(kind):
+    """``<kind>_peak`` holds mixed_peak's settings of that kind and no other kind: with each kind on
+    its own random stream, its days hold exactly mixed_peak's events of that kind (docs/PERTURBED.md,
+    by kind)."""
+    alone = env_kwargs(compose_config("train", f"perturbations={kind}_peak"))["perturbations"]
+    mixed = env_kwargs(compose_config("train", "perturbations=mixed_peak"))["perturbations"]
+    assert list(alone) == [kind] and alone[kind] == mixed[kind]
+    assert alone[kind] != env_kwargs(compose_config("train", f"perturbations={kind}"))["perturbations"][kind]
+
+
 def test_an_unknown_option_is_refused_by_hydra():
     with pytest.raises(ConfigCompositionException, match="perturbations"):
         compose_config("train", "perturbations=hail")
