@@ -8,7 +8,9 @@ regime, the perturbations it played and the observation blocks its agents saw
 (:func:`evcd.report.compare.world_label`). Each row: the mean over seeds of the seeds' mean travel
 times [95% t], and its difference with each ``--reference`` row, paired by episode within each seed
 (runs of a seed play the same episodes), mean over seeds [95% t] n=seeds; A lower / B lower of pairs.
-Prints the table and writes it to ``--out`` (refusing to overwrite).
+Fleet runs (``experiment=fleet``) pair by fleet episode on the guided EVs' mean travel time
+(``--fleet-measure``: or ``guided_travel_censored``, ``all_travel``). Prints the table and writes it
+to ``--out`` (refusing to overwrite).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import logging
 import sys
 from pathlib import Path
 
-from evcd.report.compare import Runs, compare_markdown
+from evcd.report.compare import FLEET_MEASURES, Runs, compare_markdown
 from evcd.utils.atomic import atomic_write_text
 
 log = logging.getLogger("compare_runs")
@@ -30,9 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("dirs", nargs="+", type=Path, help="run directories or folders holding them")
     p.add_argument("--reference", action="append", default=[], help="a row 'WORLD/DISPATCHER' to pair with")
     p.add_argument("--out", type=Path, default=None, help="write the table here (Markdown)")
+    p.add_argument("--fleet-measure", choices=FLEET_MEASURES, default="guided_travel",
+                   help="what fleet runs compare (default: the guided EVs' mean travel time)")  # fmt: skip
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    runs = Runs.read(args.dirs)
+    runs = Runs.read(args.dirs, args.fleet_measure)
     if not runs.travel:
         log.error("no run (results.json) under %s", [str(d) for d in args.dirs])
         return 2

@@ -7,19 +7,24 @@ agent's evaluation episodes and each baseline rule's on the same episodes. Runs 
 play the same evaluation episodes whatever the agent and whatever it observes (the days, the
 departures and the origins are drawn from the seed), so a learner that sees the forecasts can be
 paired with the plain queue-aware rule of another run of its seed, episode by episode.
+
+Fleet runs (``task=fleet``) are read the same way, episode by episode of the seed's evaluation fleet
+episodes, on the guided EVs' mean travel time (``fleet_measure``: or ``guided_travel_censored``, or
+``all_travel``); a fleet row is never paired with a single target's.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from evcd.loops.run_files import RESULTS_JSON, read_episodes_csv
+from evcd.loops.run_files import FLEET_CSV, RESULTS_JSON, baseline_csv, read_episodes_csv
 from evcd.report.markdown import markdown_table
 from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import seed_interval
@@ -27,6 +32,8 @@ from evcd.report.sweep import world_label
 
 #: (world, dispatcher)
 Row = tuple[str, str]
+#: What a fleet run's rows compare (columns of its episodes CSV).
+FLEET_MEASURES = ("guided_travel", "guided_travel_censored", "all_travel")
 
 
 @dataclass
@@ -34,22 +41,35 @@ class Runs:
     """Per (world, dispatcher) and seed, the travel time of each evaluation episode by reset seed."""
 
     travel: dict[Row, dict[int, dict[int, float]]]
+    #: the task of each row's runs ("single" or "fleet")
+    task: dict[Row, str] = field(default_factory=dict)
 
     @classmethod
-    def read(cls, dirs: Sequence[Path]) -> Runs:
-        """The runs under ``dirs`` (run directories, or folders holding them at any depth)."""
-        travel: dict[Row, dict[int, dict[int, float]]] = {}
+    def read(cls, dirs: Sequence[Path], fleet_measure: str = "guided_travel") -> Runs:
+        """The runs under ``dirs`` (run directories, or folders holding them at any depth); fleet runs
+        on ``fleet_measure`` (``guided_travel``, ``guided_travel_censored`` or ``all_travel``).
+
+        Raises:
+            ValueError: another ``fleet_measure``.
+        """
+        if fleet_measure not in FLEET_MEASURES:
+            raise ValueError(f"fleet_measure={fleet_measure!r}: choose among {', '.join(FLEET_MEASURES)}")
+        runs = cls({})
         found = [p for d in map(Path, dirs) for p in ([d / RESULTS_JSON] if (d / RESULTS_JSON).is_file()
                                                       else d.rglob(RESULTS_JSON))]  # fmt: skip
         for results in sorted(found):
             data = json.loads(results.read_text())
             world, seed = world_label(data["config"]), int(data["seed"])
-            files = {str(data["agent"]): results.parent / "episodes.csv"}
+            task = str(data.get("task", "single"))
+            fleet = task == "fleet"
+            files = {str(data["agent"]): results.parent / (FLEET_CSV if fleet else "episodes.csv")}
             for rule in data.get("baselines", {}):
-                files[rule] = results.parent / f"baseline_{rule}_episodes.csv"
+                files[rule] = results.parent / baseline_csv(rule, fleet=fleet)
             for agent, path in files.items():
-                travel.setdefault((world, agent), {}).setdefault(seed, _episodes(path))
-        return cls(travel)
+                episodes = _fleet_episodes(path, fleet_measure) if fleet else _episodes(path)
+                runs.travel.setdefault((world, agent), {}).setdefault(seed, episodes)
+                runs.task[(world, agent)] = task
+        return runs
 
     def rows(self) -> list[Row]:
         """Every (world, dispatcher), sorted."""
@@ -64,13 +84,23 @@ class Runs:
         return text, stat.n
 
     def paired(self, a: Row, b: Row) -> PairedStat | None:
-        """``a`` minus ``b``, paired by episode within each seed both have."""
+        """``a`` minus ``b``, paired by episode within each seed both have (``None``: rows of different
+        tasks, or no seed in common)."""
+        if self.task.get(a, "single") != self.task.get(b, "single"):
+            return None
         diffs = {}
         for seed in sorted(self.travel.get(a, {}).keys() & self.travel.get(b, {}).keys()):
             ta, tb = self.travel[a][seed], self.travel[b][seed]
             diffs[seed] = [ta[k] - tb[k] for k in ta.keys() & tb.keys()
                            if math.isfinite(ta[k]) and math.isfinite(tb[k])]  # fmt: skip
         return paired_stat(diffs)
+
+
+def _fleet_episodes(path: Path, measure: str) -> dict[int, float]:
+    """A fleet episodes CSV as episode index -> ``measure`` (NaN where empty)."""
+    with path.open(newline="", encoding="utf-8") as f:
+        return {int(r["episode"]): float(r[measure]) if r[measure] not in ("", "nan", "None") else math.nan
+                for r in csv.DictReader(f)}  # fmt: skip
 
 
 def _episodes(path: Path) -> dict[int, float]:

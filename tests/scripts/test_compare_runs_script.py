@@ -1,8 +1,13 @@
-"""scripts/compare_runs.py on real runs of train.py on the grid: rows per world and dispatcher, and
-pairs across runs on the same episodes."""
+"""scripts/compare_runs.py on real runs of train.py on the grid (single target and fleet): rows per
+world and dispatcher, and pairs across runs on the same episodes."""
 
 from __future__ import annotations
 
+import json
+
+import pytest
+
+from evcd.report.compare import Runs
 from tests.conftest import run_script
 
 
@@ -30,3 +35,32 @@ def test_runs_of_a_seed_pair_across_worlds(script_overrides, tmp_path):
     assert proc.returncode == 2 and "not a row" in proc.stdout + proc.stderr
     proc = run_script("compare_runs.py", str(tmp_path / "plain"), "--out", str(out))
     assert proc.returncode == 2 and "exists" in proc.stdout + proc.stderr
+
+
+def test_fleet_runs_pair_by_fleet_episode_on_the_guided_evs(script_overrides, tmp_path):
+    """The same for fleet runs: rows per world on the guided EVs' mean travel time of each fleet
+    episode (the value in the run's fleet_episodes.csv), queue_aware exactly 0 across the worlds."""
+    from tests.scripts.test_train_fleet_script import FLEET
+
+    for name, extra in (("plain", []), ("sees", ["env.observe=[points_in_service]"])):
+        run = f"hydra.run.dir={tmp_path / name}"
+        proc = run_script("train.py", *script_overrides, *FLEET, "agent=greedy", "eval.episodes=1",
+                          "eval.baselines=[queue_aware]", *extra, run)  # fmt: skip
+        assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    runs = Runs.read([tmp_path])
+    greedy = json.loads((tmp_path / "plain" / "results.json").read_text())["summary"]["guided_travel"]
+    assert runs.travel["fleet", "greedy"] == {0: {0: pytest.approx(greedy)}}
+    assert runs.task["fleet", "queue_aware"] == "fleet"
+    same = runs.paired(("fleet sees P", "queue_aware"), ("fleet", "queue_aware"))
+    assert same is not None and same.stat.mean == 0.0 and same.pairs == 1
+    censored = Runs.read([tmp_path], "guided_travel_censored")
+    assert set(censored.travel) == set(runs.travel)
+    with pytest.raises(ValueError, match="fleet_measure='speed': choose among guided_travel"):
+        Runs.read([tmp_path], "speed")
+
+
+def test_a_fleet_row_is_never_paired_with_a_single_targets():
+    runs = Runs({("fleet", "greedy"): {0: {0: 300.0}}, ("peak", "greedy"): {0: {0: 200.0}}},
+                {("fleet", "greedy"): "fleet", ("peak", "greedy"): "single"})  # fmt: skip
+    assert runs.paired(("fleet", "greedy"), ("peak", "greedy")) is None
+    assert runs.paired(("fleet", "greedy"), ("fleet", "greedy")) is not None
