@@ -38,7 +38,7 @@ from evcd.env.runners import FleetRunner, check_engine, make_runner
 from evcd.experiments.schema import register_configs
 from evcd.experiments.worlds import check_forecaster, split_days, split_kwargs
 from evcd.loops.fleet import fleet_dispatcher_learns
-from evcd.loops.hindsight import dispatcher_learns, dispatcher_names, make_dispatcher
+from evcd.loops.hindsight import check_rule, dispatcher_learns, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng
 from evcd.loops.tasks import TASKS
 from evcd.loops.train import TrainSettings, train_and_evaluate
@@ -131,20 +131,6 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         baselines[str(rule)] = make_dispatcher(str(rule), envs["eval"], baseline_rng(settings.seed))
     return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules,
             "runner": lambda phase: make_runner(envs[phase], engine, batch)}  # fmt: skip
-
-
-def check_rule(name: Any, key: str) -> str:
-    """``name`` if it is a rule of the single target (a baseline needs no training).
-
-    Raises:
-        ValueError: naming ``key``, the value and the rules allowed there.
-    """
-    known = dispatcher_names()
-    rules = [d for d in known if not dispatcher_learns(d)]
-    if name not in rules:
-        kind = "a learner, not a rule" if name in known else "not a rule"
-        raise ValueError(f"{key}: {name!r} is {kind}; the rules: {', '.join(rules)}")
-    return str(name)
 
 
 def check_learning_starts(agent: Any, episodes: int, env_config: Any) -> None:

@@ -29,14 +29,13 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.agents import make_agent_for_env
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.run_record import write_run_record
 from evcd.env import ChargingNavEnv
 from evcd.env.runners import check_engine, make_runner
 from evcd.experiments.schema import register_configs
 from evcd.experiments.worlds import check_forecaster, split_days, split_kwargs
-from evcd.loops.hindsight import dispatcher_learns, dispatcher_names
+from evcd.loops.hindsight import check_rule, make_dispatcher
 from evcd.loops.run_files import RESULTS_JSON
 from evcd.loops.seeds import baseline_rng
 from evcd.loops.train import TrainSettings, train_and_evaluate
@@ -83,12 +82,8 @@ def build(cfg: DictConfig) -> dict[str, Any]:
     engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
     train_env = ChargingNavEnv(**{**split_kwargs(cfg, "train", seed), "normalize_obs": True})
     eval_env = ChargingNavEnv(**split_kwargs(cfg, "eval", seed))
-    rules = [d for d in dispatcher_names() if not dispatcher_learns(d)]
-    baselines = {}
-    for rule in cfg.eval.baselines:
-        if rule not in rules:
-            raise ValueError(f"eval.baselines: {rule!r} is not a rule; the rules: {', '.join(rules)}")
-        baselines[str(rule)] = make_agent_for_env(str(rule), eval_env, baseline_rng(seed))
+    baselines = {str(rule): make_dispatcher(check_rule(rule, "eval.baselines"), eval_env, baseline_rng(seed))
+                 for rule in cfg.eval.baselines}  # fmt: skip
     return {
         "sb3": settings,
         "eval_settings": eval_settings,

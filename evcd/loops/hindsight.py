@@ -143,6 +143,21 @@ def check_dispatcher(name: Any) -> str:
     return str(name)
 
 
+def check_rule(name: Any, key: str) -> str:
+    """``name`` if it is a rule of the single target (a dispatcher that needs no training: a baseline
+    or a validation rule; the hindsight bound included).
+
+    Raises:
+        ValueError: naming ``key``, the value and the rules allowed there.
+    """
+    known = dispatcher_names()
+    rules = [d for d in known if not dispatcher_learns(d)]
+    if name not in rules:
+        kind = "a learner, not a rule" if name in known else "not a rule"
+        raise ValueError(f"{key}: {name!r} is {kind}; the rules: {', '.join(rules)}")
+    return str(name)
+
+
 def dispatcher_learns(name: str) -> bool:
     """Whether the dispatcher ``name`` learns (a training phase runs for it).
 

@@ -35,6 +35,7 @@ def ppo_run(script_overrides, tmp_path_factory) -> Path:
         "sb3=ppo",
         "sb3.timesteps=256",
         "seed=3",
+        "eval.baselines=[greedy,queue_aware,hindsight]",
         f"hydra.run.dir={run}",
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -52,8 +53,12 @@ def test_ppo_run_writes_evcd_results_with_sb3_training(ppo_run):
     assert training["gradient_steps"] == 40
     assert len(training["policy_sha256"]) == 64
     assert data["config"]["agent"]["name"] == "sb3_ppo" and "learner" not in data["config"]
-    assert set(data["baselines"]) == {"greedy", "queue_aware"}
+    assert set(data["baselines"]) == {"greedy", "queue_aware", "hindsight"}
     assert data["baselines"]["greedy"]["paired"]["pairs"] == 4
+    # the hindsight bound as a baseline, as in train.py: on the same episodes
+    assert data["baselines"]["hindsight"]["paired"]["pairs"] == 4
+    hindsight = _travel(ppo_run, "baseline_hindsight_episodes.csv")
+    assert [s for s, _, _ in hindsight] == [s for s, _, _ in _travel(ppo_run, "baseline_greedy_episodes.csv")]
     assert len(_travel(ppo_run)) == 4
     assert (ppo_run / "sb3_model.zip").is_file() and (ppo_run / ".hydra" / "config.yaml").is_file()
 
@@ -127,7 +132,8 @@ def test_same_seed_same_result_for_dqn(script_overrides, tmp_path):
         ("sb3.timesteps=-5", "sb3.timesteps"),
         ("+sb3.params.not_an_argument=1", "not_an_argument"),
         ("+sb3.params.seed=4", "sb3.params.seed: evcd sets it"),
-        ("eval.baselines=[dqn]", "'dqn' is not a rule"),
+        ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is a learner, not a rule; the rules: random"),
+        ("eval.baselines=[foo]", "eval.baselines: 'foo' is not a rule"),
         ("experiment=fleet", "trains the single target"),
     ],
 )
