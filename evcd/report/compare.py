@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from evcd.loops.run_files import FLEET_CSV, RESULTS_JSON, baseline_csv, read_episodes_csv
+from evcd.loops.run_files import EVAL_CSV, FLEET_CSV, RESULTS_JSON, baseline_csv, read_episodes_csv
 from evcd.report.markdown import markdown_table
 from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import seed_interval
@@ -62,7 +62,7 @@ class Runs:
             world, seed = world_label(data["config"]), int(data["seed"])
             task = str(data.get("task", "single"))
             fleet = task == "fleet"
-            files = {str(data["agent"]): results.parent / (FLEET_CSV if fleet else "episodes.csv")}
+            files = {str(data["agent"]): results.parent / (FLEET_CSV if fleet else EVAL_CSV)}
             for rule in data.get("baselines", {}):
                 files[rule] = results.parent / baseline_csv(rule, fleet=fleet)
             for agent, path in files.items():
@@ -97,10 +97,9 @@ class Runs:
 
 
 def _fleet_episodes(path: Path, measure: str) -> dict[int, float]:
-    """A fleet episodes CSV as episode index -> ``measure`` (NaN where empty)."""
+    """A fleet episodes CSV as episode index -> ``measure`` (NaN where empty: the writer's None)."""
     with path.open(newline="", encoding="utf-8") as f:
-        return {int(r["episode"]): float(r[measure]) if r[measure] not in ("", "nan", "None") else math.nan
-                for r in csv.DictReader(f)}  # fmt: skip
+        return {int(r["episode"]): float(r[measure] or "nan") for r in csv.DictReader(f)}
 
 
 def _episodes(path: Path) -> dict[int, float]:
