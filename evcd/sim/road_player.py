@@ -12,7 +12,8 @@ interval). At an incident's start and every ``reroute_every`` seconds while it l
 background vehicle whose remaining route crosses an incident edge is rerouted on those times
 (``vehicle.rerouteTraveltime``): it takes another way when that is quicker than the crawl, and keeps
 its stops (a charging EV still goes to its station). Vehicles in a junction wait for the next round
-(rerouting from a junction is what SUMO handles worst), and evcd's own targets (ids starting with
+(rerouting from a junction is what SUMO handles worst), a vehicle whose next stop is off its route
+is left alone (libsumo 1.28 crashes rerouting it), and evcd's own targets (ids starting with
 ``evcd_``) are routed by the environment, whose router sees the same crossing times.
 
 :meth:`RoadPlayer.sync` sets every element the day touches to its value at the given time, whatever
@@ -65,6 +66,7 @@ class RoadPlayer:
         self._next = 0  # index of the next change time
         self._active: tuple[tuple[int, ...], tuple[int, ...]] | None = None
         self.reroutes = 0  # vehicles rerouted (for tests and logs)
+        self.skipped = 0  # vehicles left alone: their next stop is off their route (_next_stop_ahead)
 
     # ------------------------------------------------------------------ what holds when
     def active(self, now: float) -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -150,13 +152,28 @@ class RoadPlayer:
             if vid.startswith(OWN_PREFIX) or veh.getRoadID(vid).startswith(":"):
                 continue
             route = veh.getRoute(vid)
-            if blocked.isdisjoint(route[veh.getRouteIndex(vid) + 1 :]):
+            ahead = route[veh.getRouteIndex(vid) :]
+            if blocked.isdisjoint(ahead[1:]):
+                continue
+            if not _next_stop_ahead(veh, vid, ahead):
+                self.skipped += 1
+                log.debug("not rerouting %s: its next stop is off its route", vid)
                 continue
             try:
                 veh.rerouteTraveltime(vid, False)
                 self.reroutes += 1
             except SUMO_ERRORS as exc:
                 log.debug("rerouting %s around an incident failed: %s", vid, exc)
+
+
+def _next_stop_ahead(veh: Any, vid: str, ahead: tuple[str, ...]) -> bool:
+    """Whether ``vid`` has no stop, or its next stop is on ``ahead`` (what is left of its route).
+
+    A stop off the route is what a refused re-route can leave behind (SUMO replaced the stop but
+    kept the route); ``rerouteTraveltime`` on such a vehicle crashes libsumo 1.28 (segmentation
+    fault), so the player leaves it alone."""
+    stops = veh.getStops(vid, 1)
+    return not stops or stops[0].lane.rpartition("_")[0] in ahead
 
 
 def attach(driver: Any, events: RoadEvents) -> RoadPlayer | None:
