@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -29,6 +30,8 @@ from evcd.report.markdown import markdown_table
 from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import seed_interval
 from evcd.report.sweep import world_label
+
+log = logging.getLogger(__name__)
 
 #: (world, dispatcher)
 Row = tuple[str, str]
@@ -67,7 +70,11 @@ class Runs:
                 files[rule] = results.parent / baseline_csv(rule, fleet=fleet)
             for agent, path in files.items():
                 episodes = _fleet_episodes(path, fleet_measure) if fleet else _episodes(path)
-                runs.travel.setdefault((world, agent), {}).setdefault(seed, episodes)
+                seeds = runs.travel.setdefault((world, agent), {})
+                if seed in seeds and not _same(seeds[seed], episodes):
+                    log.warning("%s / %s seed %d again in %s, with other numbers: the first run read is kept",
+                                world, agent, seed, path)  # fmt: skip
+                seeds.setdefault(seed, episodes)
                 runs.task[(world, agent)] = task
         return runs
 
@@ -94,6 +101,13 @@ class Runs:
             diffs[seed] = [ta[k] - tb[k] for k in ta.keys() & tb.keys()
                            if math.isfinite(ta[k]) and math.isfinite(tb[k])]  # fmt: skip
         return paired_stat(diffs)
+
+
+def _same(a: dict[int, float], b: dict[int, float]) -> bool:
+    """Whether two runs' episodes hold the same numbers (NaN equal to NaN)."""
+    if a.keys() != b.keys():
+        return False
+    return all(x == b[k] or (math.isnan(x) and math.isnan(b[k])) for k, x in a.items())
 
 
 def _fleet_episodes(path: Path, measure: str) -> dict[int, float]:

@@ -226,10 +226,16 @@ def _days(value: Any) -> tuple[int, ...]:
 
 def world_label(config: Mapping[str, Any]) -> str:
     """A run's world: its regime, the kinds of perturbation it played, and the observation options'
-    blocks its agents saw (``"peak"`` for a calm run without them)."""
+    blocks its agents saw, with the forecaster behind ``F`` where it is not the default ``history``
+    (``"peak"`` for a calm run without them; ``"fleet +outages sees PTF (anomaly)"``)."""
     regime = str(config.get("regime") or "unknown")
     kinds = sorted(k for k, v in (config.get("perturbations") or {}).items() if v is not None)
-    seen = "".join(OPTIONS[o] for o in OPTIONS if o in ((config.get("env") or {}).get("observe") or ()))
+    env = config.get("env") or {}
+    seen = "".join(OPTIONS[o] for o in OPTIONS if o in (env.get("observe") or ()))
+    forecaster = env.get("forecaster") or "history"
+    name = str(forecaster.get("name") if isinstance(forecaster, Mapping) else forecaster)
+    if "F" in seen and name != "history":
+        seen += f" ({name})"
     return regime + (f" +{'/'.join(kinds)}" if kinds else "") + (f" sees {seen}" if seen else "")
 
 

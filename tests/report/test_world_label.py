@@ -1,5 +1,6 @@
 """A run's world in the tables (evcd.report.sweep.world_label): calm runs keep their regime's name, a
-perturbed or better-informed run gets a table of its own."""
+perturbed or better-informed run gets a table of its own, and so does a forecast from another
+forecaster."""
 
 from __future__ import annotations
 
@@ -14,3 +15,9 @@ def test_the_world_names_the_regime_the_perturbations_and_what_the_agents_saw():
     seen = {"regime": "peak", "perturbations": {"outages": {"per_day": 2}},
             "env": {"observe": ["forecast", "points_in_service"]}}  # fmt: skip
     assert world_label(seen) == "peak +outages sees PF"
+    seen["env"]["forecaster"] = {"name": "anomaly", "bin_s": 600}  # F from another forecaster: another world
+    assert world_label(seen) == "peak +outages sees PF (anomaly)"
+    seen["env"]["forecaster"] = "history"
+    assert world_label(seen) == "peak +outages sees PF"
+    seen["env"] = {"observe": ["points_in_service"], "forecaster": "trend"}  # no F: the forecaster is unused
+    assert world_label(seen) == "peak +outages sees P"

@@ -4,6 +4,7 @@ world and dispatcher, and pairs across runs on the same episodes."""
 from __future__ import annotations
 
 import json
+import shutil
 
 import pytest
 
@@ -57,6 +58,29 @@ def test_fleet_runs_pair_by_fleet_episode_on_the_guided_evs(script_overrides, tm
     assert set(censored.travel) == set(runs.travel)
     with pytest.raises(ValueError, match="fleet_measure='speed': choose among guided_travel"):
         Runs.read([tmp_path], "speed")
+
+
+def test_a_run_read_twice_is_kept_once_and_other_numbers_for_it_are_named(script_overrides, tmp_path, caplog):
+    from tests.scripts.test_train_fleet_script import FLEET
+
+    run = tmp_path / "a"
+    proc = run_script("train.py", *script_overrides, *FLEET, "agent=greedy", "eval.episodes=1",
+                      "eval.baselines=[]", f"hydra.run.dir={run}")  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    shutil.copytree(run, tmp_path / "b")  # the same run again (a re-run that reproduced): silent
+    with caplog.at_level("WARNING", logger="evcd.report.compare"):
+        first = Runs.read([tmp_path])
+    assert not caplog.records
+    csv_path = tmp_path / "b" / "fleet_episodes.csv"
+    header, row = csv_path.read_text().splitlines()[:2]
+    cells = row.split(",")
+    at = header.split(",").index("guided_travel")
+    cells[at] = str(float(cells[at]) + 1.0)
+    csv_path.write_text("\n".join([header, ",".join(cells)]) + "\n")
+    with caplog.at_level("WARNING", logger="evcd.report.compare"):
+        again = Runs.read([tmp_path])
+    assert again.travel == first.travel  # the first read (a) is kept
+    assert any("seed 0 again" in r.getMessage() and "other numbers" in r.getMessage() for r in caplog.records)
 
 
 def test_a_fleet_row_is_never_paired_with_a_single_targets():
