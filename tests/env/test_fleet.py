@@ -111,6 +111,7 @@ def test_possible_agents_are_known_without_generating_a_day(make_fleet, tmp_path
         ({"guided_share": "half"}, "guided_share='half'"),
         ({"departure_window": (2000.0, 2000.0)}, "departure_window"),
         ({"decision_interval": -60.0}, "decision_interval=-60.0"),
+        ({"observe": ["forecast"], "forecaster": "oracle"}, "forecaster='oracle' reads the cached"),
     ],
 )
 def test_bad_settings_fail_before_sumo_starts(make_fleet, overrides: dict, message: str) -> None:

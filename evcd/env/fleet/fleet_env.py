@@ -26,7 +26,11 @@ could not insert within ``max_insert_delay`` is dropped (``not_inserted``); both
 Observation per agent: its ``[D, N, Z]`` (:mod:`evcd.env.observation`; ``N`` counts the other guided
 EVs too, they are traffic) and ``H``: per station, the *other* guided EVs currently sent there and
 still driving (not yet in its car park; the waiting ones are in ``Z``). With ``normalize_obs``, ``H``
-is in multiples of the station's points, like ``Z``. Reward per agent and slot: the single
+is in multiples of the station's points, like ``Z``. The observation options (``observe=``: ``P``,
+``T``, ``F``) follow ``H`` as in the single environment, each agent's ``F`` at its own arrival; the
+``history`` forecaster learns the training days' queues, where the charging EVs drive to their own
+stations (nobody dispatches them), and ``oracle`` is refused (the guided EVs change the cached day's
+future). Reward per agent and slot: the single
 environment's (``"time"`` by default: minus the slot's hours, so that an agent's rewards sum to minus
 its travel time: an agent's first slot runs from its departure; the step in which it appears gives
 it 0).
@@ -121,6 +125,9 @@ class FleetEnv(InWorld, ParallelEnv):
             raise ValueError("gui=True: the fleet runs headless (watch a single target's episodes with "
                              "ChargingNavEnv(gui=True))")  # fmt: skip
         config = EnvConfig(scenario=scenario, departure_window=departure_window, reward=reward, **world)
+        if "forecast" in config.observe and config.forecaster["name"] == "oracle":
+            raise ValueError("forecaster='oracle' reads the cached background day's future, which the "
+                             "fleet's guided EVs change: use 'history', 'trend' or 'anomaly'")  # fmt: skip
         self.world = World(config)
         m = len(self.stations)
         #: the observation's blocks: ``[D, N, Z, H]`` and the observation options' (e.g. ``"DNZHP"``)
