@@ -30,10 +30,9 @@ is in multiples of the station's points, like ``Z``. The observation options (``
 ``T``, ``F``) follow ``H`` as in the single environment, each agent's ``F`` at its own arrival; the
 ``history`` forecaster learns the training days' queues, where the charging EVs drive to their own
 stations (nobody dispatches them), and ``oracle`` is refused (the guided EVs change the cached day's
-future). Reward per agent and slot: the single
-environment's (``"time"`` by default: minus the slot's hours, so that an agent's rewards sum to minus
-its travel time: an agent's first slot runs from its departure; the step in which it appears gives
-it 0).
+future). Reward per agent and slot: the single environment's (``"time"`` by default: minus the slot's
+hours, so that an agent's rewards sum to minus its travel time: an agent's first slot runs from its
+departure; the step in which it appears gives it 0).
 """
 
 from __future__ import annotations
