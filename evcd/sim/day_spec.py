@@ -32,8 +32,8 @@ FORMAT_VERSION = 1
 # (numpy draws the demand, sumolib reads the network) that shape a cached day: a change invalidates it
 _CODE = ("scenario/demand.py", "scenario/routing.py", "scenario/scenario.py", "scenario/stations_file.py",
          "scenario/vtypes.py", "sim/charge_record.py", "sim/charging.py", "sim/day_spec.py", "sim/driver.py",
-         "sim/outages.py", "sim/road_events.py", "sim/road_player.py", "sim/snapshots.py", "sim/visits.py",
-         "utils/atomic.py", "utils/digest.py", "utils/sumo_tools.py", "utils/validation.py",
+         "sim/outages.py", "sim/road_events.py", "sim/road_player.py", "sim/snapshots.py", "sim/stops.py",
+         "sim/visits.py", "utils/atomic.py", "utils/digest.py", "utils/sumo_tools.py", "utils/validation.py",
          "utils/xml_files.py")  # fmt: skip
 _PACKAGES = ("numpy", "sumolib")
 

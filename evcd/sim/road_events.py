@@ -6,9 +6,11 @@
 - :class:`Incident` (an accident or a breakdown, ``[start, end)``): the edge's lanes ``lanes``
   (indices, 0 the kerb side) closed to every vehicle, and the lanes left open driven at most at
   ``pass_speed`` (m/s; drivers pass the scene slowly). What may be closed (:func:`closable_lanes`):
-  never the last lane open to cars, nor a lane whose closing cuts a turn no open lane makes or
-  leaves open lanes on both sides of it (on Jurong West, the kerb lane of a 6-lane edge was the
-  only way to a turn; closing the lane beside it stranded the vehicles there). Both
+  never the last lane open to cars, nor a lane whose closing cuts a turn out of the edge or into it
+  that no open lane makes, or leaves open lanes on both sides of it (on Jurong West, the kerb lane of
+  a 6-lane edge was the only way to a turn; closing the lane beside it stranded the vehicles there;
+  closing the only lane a turn enters makes SUMO refuse every route through that turn, "No
+  connection between edge ...", while its router still offers them). Both
   measured on SUMO 1.28: a whole edge closed by lane permissions stops the simulation ("has no
   valid route") as soon as a vehicle routed at insertion has no other way, and a lane held at speed
   0 makes the vehicles behind it teleport after ``time_to_teleport``; on Jurong West, closing the
@@ -159,7 +161,8 @@ def check_road_events(
         if allowed != e.lanes:
             raise ValueError(
                 f"{kind} on edge {e.edge!r}: closing lanes {list(e.lanes)} would leave no lane open to cars "
-                f"or cut a turn no open lane makes (vehicles turning there would be stranded); closable: "
+                f"or cut a turn into or out of it that no open lane makes (vehicles turning there would be "
+                f"stranded); closable: "
                 f"{list(closable_lanes(net, e.edge, lanes, keep_open=keep_open))}"
             )
     spells = sorted(events.rain, key=lambda r: r.start)
@@ -180,15 +183,26 @@ def closable_lanes(
     the kerb, lane 0, outwards): a lane is closed when it is not in ``keep_open`` (lane ids: the
     stations' car parks, where their EVs must stop; SUMO stops the simulation otherwise, measured),
     the lanes left open to cars are side by side (none is cut off from the others: vehicles cannot
-    change lanes across a closed one), and still reach every edge the edge's car lanes reach (no turn
-    is cut)."""
-    lanes = net.getEdge(edge).getLanes()
+    change lanes across a closed one), still reach every edge the edge's car lanes reach (no turn out
+    of it is cut), and are still entered from every edge whose cars turn into it (no turn into it is
+    cut: SUMO treats a turn whose every lane is closed as gone, refuses routes through it and strands
+    the vehicles already on them)."""
+    this = net.getEdge(edge)
+    lanes = this.getLanes()
     cars = [i for i, lane in enumerate(lanes) if lane.allows(PASSENGER)]
+    entered: dict[int, set[str]] = {i: set() for i in cars}  # lane -> the edges whose cars turn into it
+    for src, connections in this.getIncoming().items():
+        for c in connections:
+            if c.getFromLane().allows(PASSENGER) and c.getToLane().getIndex() in entered:
+                entered[c.getToLane().getIndex()].add(src.getID())
 
     def reach(open_lanes: Iterable[int]) -> set[str]:
         return {c.getTo().getID() for i in open_lanes for c in lanes[i].getOutgoing()}
 
-    every = reach(cars)
+    def entry(open_lanes: Iterable[int]) -> set[str]:
+        return set().union(*(entered[i] for i in open_lanes))
+
+    every, everyone = reach(cars), entry(cars)
     closed: list[int] = []
     for i in order if order is not None else range(len(lanes)):
         if len(closed) == most:
@@ -196,6 +210,6 @@ def closable_lanes(
         if f"{edge}_{i}" in keep_open:
             continue
         rest = [j for j in cars if j != i and j not in closed]
-        if rest and rest[-1] - rest[0] + 1 == len(rest) and reach(rest) == every:
+        if rest and rest[-1] - rest[0] + 1 == len(rest) and reach(rest) == every and entry(rest) == everyone:
             closed.append(i)
     return tuple(sorted(closed))

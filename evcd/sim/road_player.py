@@ -30,6 +30,7 @@ from typing import Any
 
 from evcd.sim.driver import SUMO_ERRORS
 from evcd.sim.road_events import Incident, RoadEvents
+from evcd.sim.stops import next_stop_on_route
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +67,7 @@ class RoadPlayer:
         self._next = 0  # index of the next change time
         self._active: tuple[tuple[int, ...], tuple[int, ...]] | None = None
         self.reroutes = 0  # vehicles rerouted (for tests and logs)
-        self.skipped = 0  # vehicles left alone: their next stop is off their route (_next_stop_ahead)
+        self.skipped = 0  # vehicles left alone: their next stop is off their route (evcd.sim.stops)
 
     # ------------------------------------------------------------------ what holds when
     def active(self, now: float) -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -155,7 +156,8 @@ class RoadPlayer:
             ahead = route[veh.getRouteIndex(vid) :]
             if blocked.isdisjoint(ahead[1:]):
                 continue
-            if not _next_stop_ahead(veh, vid, ahead):
+            stop, on_route = next_stop_on_route(veh, vid)
+            if stop is not None and not on_route:
                 self.skipped += 1
                 log.debug("not rerouting %s: its next stop is off its route", vid)
                 continue
@@ -164,16 +166,6 @@ class RoadPlayer:
                 self.reroutes += 1
             except SUMO_ERRORS as exc:
                 log.debug("rerouting %s around an incident failed: %s", vid, exc)
-
-
-def _next_stop_ahead(veh: Any, vid: str, ahead: tuple[str, ...]) -> bool:
-    """Whether ``vid`` has no stop, or its next stop is on ``ahead`` (what is left of its route).
-
-    A stop off the route is what a refused re-route can leave behind (SUMO replaced the stop but
-    kept the route); ``rerouteTraveltime`` on such a vehicle crashes libsumo 1.28 (segmentation
-    fault), so the player leaves it alone."""
-    stops = veh.getStops(vid, 1)
-    return not stops or stops[0].lane.rpartition("_")[0] in ahead
 
 
 def attach(driver: Any, events: RoadEvents) -> RoadPlayer | None:

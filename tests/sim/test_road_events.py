@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import sumolib
 
-from evcd.sim.driver import SumoDriver
+from evcd.sim.driver import SUMO_ERRORS, SumoDriver
 from evcd.sim.road_events import Incident, Rain, RoadEvents, RoadWork, check_road_events, closable_lanes
 from evcd.sim.road_player import RoadPlayer, attach
 from evcd.utils.sumo_tools import run_tool
@@ -43,13 +43,20 @@ def line_net(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def grid_net(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 3 x 3 grid of 2-lane streets, 400 m long: many ways from one side to the other."""
-    net = tmp_path_factory.mktemp("grid") / "grid.net.xml"
+    """A 3 x 3 grid of 2-lane streets, 400 m long: many ways from one side to the other. netgenerate
+    turns right into a street's kerb lane only, so no lane of its grid can close without cutting a
+    turn in; here the right turn from B1A1 enters both lanes of A1A2, whose kerb lane may close."""
+    root = tmp_path_factory.mktemp("grid")
     run_tool(
         "netgenerate",
         ["--grid", "--grid.number", 3, "--grid.length", 400, "--default.lanenumber", 2,
-         "--default.speed", FREE, "-o", net],
+         "--default.speed", FREE, "-o", root / "plain.net.xml"],
     )  # fmt: skip
+    (root / "turn.con.xml").write_text(
+        '<connections><connection from="B1A1" to="A1A2" fromLane="0" toLane="1"/></connections>'
+    )
+    net = root / "grid.net.xml"
+    run_tool("netconvert", ["-s", root / "plain.net.xml", "-x", root / "turn.con.xml", "-o", net])
     return net
 
 
@@ -142,8 +149,9 @@ def test_vehicles_with_an_alternative_go_around_an_incident(grid_net, tmp_path):
 
 
 def test_closed_lanes_carry_nobody_and_road_works_cap_the_speed(grid_net, tmp_path):
-    """Road works on A1A2 with its kerb lane closed (lane 1 makes every turn lane 0 makes): nobody
-    drives lane 0, nobody drives faster than the works' limit, nobody is stranded."""
+    """Road works on A1A2 with its kerb lane closed (lane 1 makes every turn out of it lane 0 makes,
+    and every turn into it enters lane 1 too): nobody drives lane 0, nobody drives faster than the
+    works' limit, nobody is stranded."""
     routes = _flow(tmp_path / "r.rou.xml", "A0A1", "A2B2", period=3.0)
     seen = {"closed": 0, "fastest": 0.0}
 
@@ -158,6 +166,38 @@ def test_closed_lanes_carry_nobody_and_road_works_cap_the_speed(grid_net, tmp_pa
     run = _run(grid_net, routes, works, probe=probe)
     assert run["tp"] == 0 and seen["closed"] == 0 and len(run["arrive"]) == 500
     assert 0 < seen["fastest"] <= 30 / 3.6 + 0.01
+
+
+def test_a_closure_keeps_every_turn_into_its_edge(grid_net, tmp_path):
+    """Why :func:`closable_lanes` keeps the turns in: on netgenerate's grid the right turn from B1A1
+    enters A1A2's kerb lane only; with that lane closed SUMO refuses a route through the turn
+    ("No connection between edge 'B1A1' and edge 'A1A2'") while its router still offers it, so that
+    closure is refused. Where the turn also enters lane 1 (``grid_net``), the lane may close and the
+    same route is taken."""
+    plain = grid_net.parent / "plain.net.xml"
+    assert closable_lanes(_net(plain), "A1A2", 2) == () and closable_lanes(_net(grid_net), "A1A2", 2) == (0,)
+    with pytest.raises(ValueError, match="cut a turn into or out of it"):
+        check_road_events(RoadEvents(roadworks=(RoadWork("A1A2", lanes=(0,)),)), _net(plain))
+    routes = tmp_path / "v.rou.xml"
+    routes.write_text(
+        '<routes><vType id="car" sigma="0"/><vehicle id="v" type="car" depart="200" departSpeed="max">'
+        '<route edges="C1B1 B1A1 A1A0"/></vehicle></routes>'
+    )
+    through = ["C1B1", "B1A1", "A1A2", "A2B2"]
+    incident = RoadEvents(incidents=(Incident("A1A2", 100.0, 400.0, lanes=(0,), pass_speed=5 / 3.6),))
+    for net, refused in ((plain, True), (grid_net, False)):
+        with SumoDriver(net, (), [routes], seed=0, warnings=False) as driver:
+            attach(driver, incident)
+            driver.step(until=205.0)
+            api = driver.api
+            assert api.vehicle.getRoadID("v") == "C1B1"
+            assert list(api.simulation.findRoute("C1B1", "A2B2", "car").edges) == through
+            if refused:
+                with pytest.raises(SUMO_ERRORS, match="No connection between edge 'B1A1' and edge 'A1A2'"):
+                    api.vehicle.setRoute("v", through)
+            else:
+                api.vehicle.setRoute("v", through)
+                assert list(api.vehicle.getRoute("v")) == through
 
 
 def test_rain_slows_the_mean_speed_by_about_its_factor(line_net, tmp_path):

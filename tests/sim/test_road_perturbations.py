@@ -93,7 +93,7 @@ def test_an_environment_plays_its_days_road_events(grid, tmp_path):
     try:
         days = env.world.days
         assert days[0].roads.incidents and days[0].roads != days[1].roads
-        assert any(e.lanes for d in days for e in d.roads.incidents)  # some close a lane (32 of 224 may)
+        assert any(e.lanes for d in days for e in d.roads.incidents)  # some close a lane (28 of 224 may)
         for day in (0, 1):
             env.reset(seed=1, options={"day": day, "departure": 1900.0})
             api = env.world.simulation.api

@@ -27,6 +27,7 @@ from evcd.scenario.stations_file import Station
 from evcd.sim.charge_record import ChargeRecord
 from evcd.sim.charging import ChargingController
 from evcd.sim.driver import SUMO_ERRORS
+from evcd.sim.stops import next_stop_on_route
 
 log = logging.getLogger(__name__)
 
@@ -169,11 +170,8 @@ def _stops_on_its_route(veh: Any, vid: str, parking_area: str) -> bool:
     route, which then never reaches the new car park: SUMO drops the stop and the EV drives on to
     its destination without charging (it vanished, uncharged, in 1-3 % of the rules' guided EVs at
     600 EVs before this check)."""
-    stops = veh.getStops(vid, 1)
-    if not stops or stops[0].stoppingPlaceID != parking_area:
-        return False
-    edge = stops[0].lane.rsplit("_", 1)[0]
-    return edge in veh.getRoute(vid)[veh.getRouteIndex(vid) :]
+    stop, on_route = next_stop_on_route(veh, vid)
+    return stop is not None and stop.stoppingPlaceID == parking_area and on_route
 
 
 def _through_junction(api: Any, route: Sequence[str], dst: str) -> tuple[str, ...]:
