@@ -8,7 +8,9 @@ For each evaluation day, decision time in the departure window and horizon, each
 forecast of the vehicles at each station at the time plus the horizon, against what the day's
 records say (:mod:`evcd.experiments.forecast_report`). Writes ``forecast_errors.json`` (every row)
 and ``forecast_errors.md`` (a table per forecaster, stations by hour) into the Hydra run directory.
-The history forecaster learns from ``days.train`` only.
+The forecasters that learn (history, anomaly, sessions) learn from ``days.train`` only;
+``forecast.split=tuning`` scores the tuning days instead (where settings are chosen, e.g.
+``+forecast.settings.sessions.history_weight=0.25``).
 """
 
 from __future__ import annotations
@@ -23,12 +25,13 @@ from omegaconf import DictConfig, OmegaConf
 
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.run_record import write_run_record
+from evcd.env.config import forecaster_setting
 from evcd.experiments.forecast_report import day_timelines, forecaster_errors, overall
 from evcd.experiments.schema import register_configs
 from evcd.experiments.worlds import split_kwargs
 from evcd.forecast import FORECASTERS, format_mae_table
 from evcd.utils.atomic import atomic_write_json, atomic_write_text
-from evcd.utils.validation import check_real
+from evcd.utils.validation import check_choice, check_real
 
 log = logging.getLogger("forecast_errors")
 
@@ -41,17 +44,25 @@ def report(cfg: DictConfig, out_dir: Path) -> dict:
         raise ValueError(f"forecast.forecasters={names}: choose among {', '.join(FORECASTERS)}")
     horizons = [check_real("forecast.horizons_s", h, low=0.0) for h in cfg.forecast.horizons_s]
     every = check_real("forecast.every_s", cfg.forecast.every_s, low=0.0, low_open=True)
-    train_kwargs, eval_kwargs = split_kwargs(cfg, "train", 0), split_kwargs(cfg, "eval", 0)
+    split = check_choice("forecast.split", str(cfg.forecast.split), ("eval", "tuning"))
+    settings = OmegaConf.to_container(cfg.forecast.settings, resolve=True) or {}
+    stray = sorted(set(settings) - set(names))
+    if stray:
+        raise ValueError(f"forecast.settings names {stray}: settings go to the forecasters compared, {names}")
+    for name, given in settings.items():  # checks the names and values of the settings before any day
+        forecaster_setting({"name": name, **given})
+    train_kwargs, eval_kwargs = split_kwargs(cfg, "train", 0), split_kwargs(cfg, split, 0)
     write_run_record(out_dir, cfg)
     t0 = time.perf_counter()
     train, held_out = day_timelines(train_kwargs), day_timelines(eval_kwargs)
     window = tuple(eval_kwargs["departure_window"])
-    rows = forecaster_errors(train, held_out, window, names, horizons, every)
+    rows = forecaster_errors(train, held_out, window, names, horizons, every, settings)
     wall = time.perf_counter() - t0
     perturbed = OmegaConf.to_container(cfg.perturbations, resolve=True) or {}
     data = {
         "evs": int(cfg.evs), "train_days": list(train_kwargs["demand_seeds"]),
-        "evaluation_days": list(eval_kwargs["demand_seeds"]), "window": list(window),
+        "evaluation_days": list(eval_kwargs["demand_seeds"]), "split": split, "settings": settings,
+        "window": list(window),
         "perturbations": perturbed, "horizons_s": horizons, "every_s": every,
         "overall_mae": {n: overall(r) for n, r in rows.items()}, "rows": rows, "wall_s": round(wall, 1),
     }  # fmt: skip
@@ -59,7 +70,8 @@ def report(cfg: DictConfig, out_dir: Path) -> dict:
     lines = [
         f"# Forecast errors: vehicles at each station at arrival (MAE, vehicles), {cfg.evs} EVs",
         "",
-        f"Held-out days {data['evaluation_days']} (history fitted on days {data['train_days']}); decision "
+        f"{'Held-out' if split == 'eval' else 'Tuning'} days {data['evaluation_days']} (history fitted on "
+        f"days {data['train_days']}; settings {settings or 'the defaults'}); decision "
         f"times every {every:g} s in {window[0]:g}-{window[1]:g} s of day; horizons {horizons} s; "
         f"perturbations: {', '.join(perturbed) or 'none (calm)'}. Wall {wall:.0f} s.",
         "",

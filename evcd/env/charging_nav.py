@@ -106,9 +106,11 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
         forecaster: what ``F`` comes from (:mod:`evcd.forecast`): ``"history"`` (per station and time
             of day, the mean of ``forecast_days``), ``"trend"`` (a line through the current day's last
             15 min), ``"anomaly"`` (the history plus today's deviation from it now, fading with the
-            horizon) or ``"oracle"`` (the day's own future: analysis only), or a mapping with
-            ``name`` and its settings (``bin_s``, ``window_s``, ``sample_s``, ``max_lag_s``).
-        forecast_days: the demand seeds of the days the history and anomaly forecasters learn from
+            horizon), ``"sessions"`` (the queue now, less the charging sessions likely to end by the
+            arrival, plus the arrivals expected by then) or ``"oracle"`` (the day's own future:
+            analysis only), or a mapping with ``name`` and its settings (``bin_s``, ``window_s``,
+            ``sample_s``, ``max_lag_s``, ``history_weight``, ``statistic``).
+        forecast_days: the demand seeds of the days the history, anomaly and sessions forecasters learn from
             (the scripts give them their training days); those forecasters refuse to run without them.
 
     Every invalid argument raises ``ValueError`` naming it before SUMO starts. The seed is given

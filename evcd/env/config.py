@@ -183,7 +183,8 @@ def forecaster_setting(value: str | Mapping[str, Any]) -> dict[str, Any]:
     """``forecaster`` as ``{"name": ..., settings...}`` (a name alone, or a mapping with ``name``).
 
     Raises:
-        ValueError: an unknown forecaster or setting (naming the allowed ones).
+        ValueError: an unknown forecaster or setting (naming the allowed ones), or a setting's value
+            out of range (the forecaster is made once to check them; the oracle takes no settings here).
     """
     spec = {"name": value} if isinstance(value, str) else dict(value)
     name = spec.get("name")
@@ -193,4 +194,6 @@ def forecaster_setting(value: str | Mapping[str, Any]) -> dict[str, Any]:
     unknown = sorted(set(spec) - {"name", *allowed})
     if unknown:
         raise ValueError(f"forecaster {name!r}: unknown setting {unknown[0]!r}; it takes {allowed or 'none'}")
+    if name != "oracle":
+        FORECASTERS[name](**{k: v for k, v in spec.items() if k != "name"})  # checks the values
     return spec

@@ -8,8 +8,8 @@
 The forecasters (:mod:`evcd.forecast`) read occupancy timelines made from the stations' visit
 records: the history days' from their cached snapshots (the controller's records at the last one:
 the day up to the end of the departure window), the current day's from the controller now (the
-trend's input), the played day's own from its cache (the oracle's, an upper bound for analysis:
-``scripts/train.py`` refuses it).
+trend's, the anomaly's and the sessions' input), the played day's own from its cache (the oracle's,
+an upper bound for analysis: ``scripts/train.py`` refuses it).
 """
 
 from __future__ import annotations
@@ -37,10 +37,10 @@ class ForecastSource:
     """The forecast of the vehicles at each station at an EV's arrival (module docstring).
 
     Args:
-        name: ``"history"``, ``"trend"``, ``"anomaly"`` or ``"oracle"``.
+        name: ``"history"``, ``"trend"``, ``"anomaly"``, ``"sessions"`` or ``"oracle"``.
         settings: the forecaster's settings (``bin_s``, ``window_s``, ``sample_s``, ``max_lag_s``).
         stations: the station ids, in action order.
-        history_days: the days the history and anomaly forecasters are fitted on (the training days).
+        history_days: the days the forecasters that learn are fitted on (the training days).
         times: the snapshot times the days are built at (the environment's).
     """
 

@@ -5,10 +5,10 @@ For every evaluation day (its snapshots built over the departure window), every 
 the window (each ``every_s``) and every horizon (5-20 min by default), each forecaster's forecast of
 the vehicles at each station at the time plus the horizon is compared with what the day's records
 say happened: the mean absolute error by station and hour (:func:`evcd.forecast.forecast_errors`).
-The history and anomaly forecasters learn from the training days only; the trend reads each day up to the
-decision time; the oracle reads the day itself (its error is 0 where the records reach: a check,
-not a forecaster one could run). The reference ``now`` is no forecast at all: the vehicles there at
-the decision time (what ``queue_aware`` reads, the trend over a window of 0 s).
+The history, anomaly and sessions forecasters learn from the training days only; the trend reads
+each day up to the decision time; the oracle reads the day itself (its error is 0 where the records
+reach: a check, not a forecaster one could run). The reference ``now`` is no forecast at all: the
+vehicles there at the decision time (what ``queue_aware`` reads, the trend over a window of 0 s).
 """
 
 from __future__ import annotations
@@ -24,10 +24,9 @@ from evcd.sim.snapshots import DayCache, snapshot_times
 
 def day_timelines(kwargs: Mapping[str, Any]) -> list[OccupancyTimeline]:
     """The occupancy timelines of the days of an environment's arguments ``kwargs`` (built where
-    missing)."""
-    config = EnvConfig(
-        **{k: v for k, v in kwargs.items() if k not in ("observe", "forecaster", "forecast_days")}
-    )
+    missing; for the fleet's, its background days as cached, every EV driving to its own choice)."""
+    skip = ("observe", "forecaster", "forecast_days", "guided_share")
+    config = EnvConfig(**{k: v for k, v in kwargs.items() if k not in skip})
     scenario, days = config.load()
     times = snapshot_times(config.departure_window, config.snapshot_every)
     ids = [st.id for st in scenario.stations]
@@ -38,13 +37,15 @@ def forecaster_errors(
     train: Sequence[OccupancyTimeline],
     held_out: Sequence[OccupancyTimeline],
     window: tuple[float, float],
-    names: Sequence[str] = ("history", "trend", "anomaly", "oracle"),
+    names: Sequence[str] = ("history", "trend", "anomaly", "sessions", "oracle"),
     horizons_s: Sequence[float] = (300.0, 600.0, 900.0, 1200.0),
     every_s: float = 60.0,
+    settings: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> dict[str, list[dict[str, Any]]]:
-    """Per forecaster name, the rows ``{station, hour, mae, n}`` on the ``held_out`` days (the history
-    and the anomaly fitted on ``train``; the oracle made for each day in turn, its rows pooled), and
-    under ``now`` the reference of the vehicles there at the decision time."""
+    """Per forecaster name, the rows ``{station, hour, mae, n}`` on the ``held_out`` days (each made
+    with its ``settings[name]``, else its defaults; those that learn fitted on ``train``; the oracle
+    made for each day in turn, its rows pooled), and under ``now`` the reference of the vehicles there
+    at the decision time."""
     now = make_forecaster("trend", window_s=0.0)
     out: dict[str, list[dict[str, Any]]] = {
         "now": forecast_errors(now, held_out, window, horizons_s, every_s)
@@ -56,7 +57,7 @@ def forecaster_errors(
             out[name] = pool_rows([r for rows in per_day for r in rows])
         else:
             days = train if FORECASTERS[name].needs_days else ()
-            forecaster = make_forecaster(name, days)
+            forecaster = make_forecaster(name, days, **(settings or {}).get(name, {}))
             out[name] = forecast_errors(forecaster, held_out, window, horizons_s, every_s)
     return out
 

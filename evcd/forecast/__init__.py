@@ -3,8 +3,8 @@
 - :class:`OccupancyTimeline` (:mod:`~evcd.forecast.timeline`): vehicles at each station over time,
   from the controller's visit records, known up to the time they were read;
 - :class:`Forecaster` and its :class:`HistoryForecaster`, :class:`TrendForecaster`,
-  :class:`AnomalyForecaster` and :class:`OracleForecaster` (:mod:`~evcd.forecast.forecasters`), made
-  by name with :func:`make_forecaster`;
+  :class:`AnomalyForecaster`, :class:`SessionsForecaster` and :class:`OracleForecaster`
+  (:mod:`~evcd.forecast.forecasters`), made by name with :func:`make_forecaster`;
 - :func:`forecast_errors` and :func:`format_mae_table` (:mod:`~evcd.forecast.errors`): a forecaster's
   mean absolute error per station and hour on played days.
 """
@@ -18,6 +18,7 @@ from evcd.forecast.forecasters import (
     Forecaster,
     HistoryForecaster,
     OracleForecaster,
+    SessionsForecaster,
     TrendForecaster,
     make_forecaster,
 )
@@ -30,6 +31,7 @@ __all__ = [
     "HistoryForecaster",
     "OccupancyTimeline",
     "OracleForecaster",
+    "SessionsForecaster",
     "TrendForecaster",
     "forecast_errors",
     "format_mae_table",

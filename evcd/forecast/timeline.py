@@ -2,7 +2,8 @@
 
 A vehicle is *at* a station (charging or waiting) from its record's ``arrival_time`` (inclusive) to its
 ``release_time`` (exclusive), as :meth:`ChargingController.occupancy
-<evcd.sim.charging.ChargingController.occupancy>` counts it after a step. A timeline is built from the
+<evcd.sim.charging.ChargingController.occupancy>` counts it after a step; it charges from its
+``start_time`` (when it got a point; a record without one never charged). A timeline is built from the
 records read at one moment, ``known_until``: what happens after it is unknown, a visit still going on
 then (``release_time`` ``None`` or later) counts until ``known_until``, and a question about a later
 time is refused unless asked with ``clip=True``.
@@ -25,8 +26,9 @@ if TYPE_CHECKING:
     from evcd.sim.charge_record import ChargeRecord
 
 
-def _visit(record: ChargeRecord | Mapping[str, Any]) -> tuple[str, float, float | None]:
-    """``(station, arrival_time, release_time)`` of a record or of its ``to_dict()`` form."""
+def _visit(record: ChargeRecord | Mapping[str, Any]) -> tuple[str, float, float | None, float | None]:
+    """``(station, arrival_time, release_time, start_time)`` of a record or of its ``to_dict()`` form
+    (``start_time`` may be absent from a mapping: the visit never charged)."""
     if isinstance(record, Mapping):
         missing = [k for k in ("station", "arrival_time", "release_time") if k not in record]
         require(
@@ -35,8 +37,10 @@ def _visit(record: ChargeRecord | Mapping[str, Any]) -> tuple[str, float, float 
             "arrival_time and release_time (ChargeRecord.to_dict() has them)",
         )
         station, arrival, release = record["station"], record["arrival_time"], record["release_time"]
+        start = record.get("start_time")
     else:
         station, arrival, release = record.station, record.arrival_time, record.release_time
+        start = record.start_time
     arrival = check_real("arrival_time", arrival)
     if release is not None:
         release = check_real("release_time", release)
@@ -44,7 +48,14 @@ def _visit(record: ChargeRecord | Mapping[str, Any]) -> tuple[str, float, float 
             release >= arrival,
             f"release_time={release} of a visit at {station!r}: must be >= its arrival_time={arrival}",
         )
-    return str(station), arrival, release
+    if start is not None:
+        start = check_real("start_time", start)
+        require(
+            arrival <= start and (release is None or start <= release),
+            f"start_time={start} of a visit at {station!r}: must lie between its arrival_time={arrival} "
+            f"and its release_time={release}",
+        )
+    return str(station), arrival, release, start
 
 
 class OccupancyTimeline:
@@ -52,7 +63,9 @@ class OccupancyTimeline:
 
     Build it with :meth:`from_records`. Per station it keeps the sorted arrival times and the sorted
     release times (those up to ``known_until``); the count at ``t`` is the arrivals at or before ``t``
-    less the releases at or before ``t`` (two binary searches per station).
+    less the releases at or before ``t`` (two binary searches per station). It also keeps the charging
+    sessions, ``(start, end)`` pairs (``end`` infinite while unknown), for :meth:`charging_since` and
+    :meth:`charge_durations`.
 
     Attributes:
         stations: the station ids, in the order of the columns of :meth:`at`.
@@ -65,9 +78,12 @@ class OccupancyTimeline:
         arrivals: Sequence[np.ndarray],
         releases: Sequence[np.ndarray],
         known_until: float,
+        sessions: Sequence[np.ndarray] | None = None,
     ) -> None:
         """Prefer :meth:`from_records`. ``arrivals[j]`` and ``releases[j]`` are the sorted arrival and
-        release times at ``stations[j]`` (each release belongs to an arrival; all <= ``known_until``)."""
+        release times at ``stations[j]`` (each release belongs to an arrival; all <= ``known_until``);
+        ``sessions[j]`` the ``(start, end)`` rows of its charging sessions sorted by start (``end``
+        ``inf`` while unknown; none by default)."""
         self.stations: tuple[str, ...] = tuple(stations)
         self.known_until: float = check_real("known_until", known_until)
         require(len(self.stations) > 0, "stations=(): a timeline needs at least one station")
@@ -82,6 +98,13 @@ class OccupancyTimeline:
         )
         self._arrivals = [np.asarray(a, dtype=np.float64) for a in arrivals]
         self._releases = [np.asarray(r, dtype=np.float64) for r in releases]
+        if sessions is None:
+            sessions = [np.empty((0, 2)) for _ in self.stations]
+        require(
+            len(sessions) == len(self.stations),
+            f"{len(sessions)} session arrays for {len(self.stations)} stations: need one per station",
+        )
+        self._sessions = [np.asarray(x, dtype=np.float64).reshape(-1, 2) for x in sessions]
 
     @classmethod
     def from_records(
@@ -94,7 +117,8 @@ class OccupancyTimeline:
         form, e.g. a controller's ``state_dict()["records"]``), read at time ``known_until``.
 
         Records arriving after ``known_until`` are ignored; a visit with ``release_time`` ``None`` or
-        after ``known_until`` counts as present until ``known_until``.
+        after ``known_until`` counts as present until ``known_until``; a charging session started
+        after ``known_until`` is not known yet.
 
         Raises:
             ValueError: a record at a station not in ``stations`` (naming it and the allowed ones), a
@@ -106,8 +130,9 @@ class OccupancyTimeline:
         column = {sid: j for j, sid in enumerate(stations)}
         arrivals: list[list[float]] = [[] for _ in stations]
         releases: list[list[float]] = [[] for _ in stations]
+        sessions: list[list[tuple[float, float]]] = [[] for _ in stations]
         for record in records:
-            station, arrival, release = _visit(record)
+            station, arrival, release, start = _visit(record)
             if station not in column:
                 raise ValueError(
                     f"a record at station {station!r}: the timeline's stations are {list(stations)}"
@@ -116,9 +141,18 @@ class OccupancyTimeline:
                 continue
             j = column[station]
             arrivals[j].append(arrival)
-            if release is not None and release <= known_until:
+            known_release = release is not None and release <= known_until
+            if known_release:
                 releases[j].append(release)
-        return cls(stations, [np.sort(a) for a in arrivals], [np.sort(r) for r in releases], known_until)
+            if start is not None and start <= known_until:
+                sessions[j].append((start, release if known_release else np.inf))
+        return cls(
+            stations,
+            [np.sort(a) for a in arrivals],
+            [np.sort(r) for r in releases],
+            known_until,
+            [np.array(sorted(x), dtype=np.float64).reshape(-1, 2) for x in sessions],
+        )
 
     def _times(self, times: Any, clip: bool) -> np.ndarray:
         """``times`` as finite float64, clipped to ``known_until`` or refused beyond it."""
@@ -194,7 +228,31 @@ class OccupancyTimeline:
         t = check_real("known_until", known_until, high=self.known_until)
         arrivals = [a[: np.searchsorted(a, t, side="right")] for a in self._arrivals]
         releases = [r[: np.searchsorted(r, t, side="right")] for r in self._releases]
-        return OccupancyTimeline(self.stations, arrivals, releases, t)
+        sessions = []
+        for x in self._sessions:
+            x = x[x[:, 0] <= t].copy()
+            x[x[:, 1] > t, 1] = np.inf
+            sessions.append(x)
+        return OccupancyTimeline(self.stations, arrivals, releases, t, sessions)
+
+    def arrival_times(self) -> tuple[np.ndarray, ...]:
+        """Per station, the sorted arrival times of its visits up to ``known_until`` (copies)."""
+        return tuple(a.copy() for a in self._arrivals)
+
+    def charging_since(self, now: float) -> tuple[np.ndarray, ...]:
+        """Per station, the start times of the sessions charging at ``now`` (started at or before it,
+        not yet ended), sorted.
+
+        Raises:
+            ValueError: ``now`` after ``known_until`` or not a finite number.
+        """
+        now = check_real("now", now, high=self.known_until)
+        return tuple(x[(x[:, 0] <= now) & (x[:, 1] > now), 0] for x in self._sessions)
+
+    def charge_durations(self) -> np.ndarray:
+        """The durations (end - start) of every session that ended by ``known_until``, all stations."""
+        done = [x[np.isfinite(x[:, 1])] for x in self._sessions]
+        return np.concatenate([x[:, 1] - x[:, 0] for x in done]) if done else np.empty(0)
 
     def __repr__(self) -> str:
         visits = sum(a.size for a in self._arrivals)

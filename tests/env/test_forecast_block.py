@@ -1,6 +1,7 @@
 """The forecast block ``F`` (``observe=[..., forecast]``): each forecaster's values in the observation
 equal the forecaster's own on the days' records (history fitted on ``forecast_days``, the trend on
-the controller's records now, the oracle on the played day's), in both units; the forecast rule
+the controller's records now, the anomaly and the sessions on both, the oracle on the played day's),
+in both units; the forecast rule
 reads it; bad input refused before SUMO."""
 
 from __future__ import annotations
@@ -73,13 +74,16 @@ def test_the_trend_reads_todays_records_up_to_now(make_env):
     np.testing.assert_allclose(env.last_observation.extra["F"], expected)
 
 
-def test_the_anomaly_learns_from_the_forecast_days_and_reads_todays_records_up_to_now(make_env, env_cache):
-    env = make_env(observe=OBSERVE, forecaster={"name": "anomaly", "bin_s": 600}, forecast_days=(3, 4))
+@pytest.mark.parametrize("name", ["anomaly", "sessions"])
+def test_a_forecaster_that_learns_from_the_forecast_days_reads_todays_records_up_to_now(
+    make_env, env_cache, name
+):
+    env = make_env(observe=OBSERVE, forecaster={"name": name, "bin_s": 600}, forecast_days=(3, 4))
     env.reset(seed=2)
     now, arrival = _arrival(env)
     ids = [st.id for st in env.stations]
     history = [DayCache(spec, env_cache) for spec in env.config.history_days(env.scenario)]
-    fitted = make_forecaster("anomaly", [day_timeline(c, _times(env), ids) for c in history], bin_s=600)
+    fitted = make_forecaster(name, [day_timeline(c, _times(env), ids) for c in history], bin_s=600)
     today = OccupancyTimeline.from_records(env.simulation.controller.records, ids, known_until=now)
     expected = fitted.forecast(now, arrival, today)
     np.testing.assert_allclose(env.last_observation.extra["F"], expected)
@@ -122,7 +126,11 @@ def test_the_forecast_rule_plays_an_episode(make_env):
         ),
         (
             {"observe": ["forecast"], "forecaster": "crystal_ball"},
-            "the forecasters are history, trend, anomaly, oracle",
+            "the forecasters are history, trend, anomaly, sessions, oracle",
+        ),
+        (
+            {"observe": ["forecast"], "forecaster": {"name": "sessions", "statistic": "mode"}},
+            "statistic='mode': must be one of median, mean",
         ),
         ({"observe": ["forecast"], "forecaster": {"name": "trend", "bin_s": 5}}, "unknown setting 'bin_s'"),
         ({"observe": ["forecast"], "forecaster": "trend", "forecast_days": []}, "forecast_days=[]"),

@@ -1,5 +1,5 @@
-"""The forecasters (history, trend, anomaly, oracle), make_forecaster and the error table, every value
-hand-computed on toy days of a few visits."""
+"""The forecasters (history, trend, anomaly, sessions, oracle), make_forecaster and the error table,
+every value hand-computed on toy days of a few visits."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from evcd.forecast import (
     HistoryForecaster,
     OccupancyTimeline,
     OracleForecaster,
+    SessionsForecaster,
     TrendForecaster,
     forecast_errors,
     format_mae_table,
@@ -164,6 +165,80 @@ def test_the_oracle_forecasts_the_days_own_future_exactly():
     assert out.dtype == np.float64 and out.tolist() == [[5.0, 5.0], [15.0, 1.0], [15.0, 0.0]]
 
 
+# ------------------------------------------------------------------------------------------ sessions
+def sday(visits: list[tuple[str, float, float | None, float | None]], known_until: float):
+    """A timeline of ``(station, arrival, start, release)`` visits at stations a and b."""
+    records = [
+        {"station": s, "arrival_time": float(a), "start_time": None if t is None else float(t),
+         "release_time": None if r is None else float(r)}
+        for s, a, t, r in visits
+    ]  # fmt: skip
+    return OccupancyTimeline.from_records(records, ("a", "b"), known_until)
+
+
+#: Training sessions of 600, 400, 800 and 200 s (the one from 900 has not ended); with bins of 600 s a
+#: arrives twice in bin 0 of one day and once in bin 1 of the other, b twice in bin 0.
+S_DAY1 = sday([("a", 0, 0, 600), ("a", 100, 600, 1000), ("b", 300, 300, 1100)], 1200.0)
+S_DAY2 = sday([("b", 0, 0, 200), ("a", 900, 900, None)], 1200.0)
+#: Today at 600 (known until 700): a has sessions charging for 400 and 40 s and one vehicle waiting (the
+#: arrival at 650 is after now); b one session for 150 s (the visit released at 300 is gone).
+S_TODAY = sday(
+    [("a", 200, 200, None), ("a", 500, None, None), ("a", 550, 560, None), ("a", 650, None, None),
+     ("b", 100, 150, 300), ("b", 400, 450, None)],
+    700.0,
+)  # fmt: skip
+
+
+def test_the_sessions_forecaster_learns_the_charging_durations_and_the_arrival_rates():
+    sessions = SessionsForecaster(bin_s=600.0, window_s=600.0).fit([S_DAY1, S_DAY2])
+    # durations 200, 400, 600, 800: S(x) is the share longer than x
+    got = sessions.survival([0.0, 200.0, 399.0, 400.0, 700.0, 800.0])
+    assert got.tolist() == [1, 0.75, 0.75, 0.5, 0.25, 0]
+    # arrivals before t, means of the two days: a 2 in bin 0, 1 in bin 1 (0.5 a day); b 2 in bin 0
+    t = np.array([[0.0, 0.0], [300.0, 300.0], [600.0, 600.0], [900.0, 900.0], [3000.0, 3000.0]])
+    assert sessions.expected_history_arrivals(t).tolist() == [
+        [0.0, 0.0], [0.5, 0.5], [1.0, 1.0], [1.25, 1.0], [1.5, 1.0]  # 3000: the last bin's rate, 0
+    ]  # fmt: skip
+
+
+def test_the_sessions_forecast_keeps_the_queue_ends_sessions_and_adds_arrivals_by_hand():
+    fitted = [S_DAY1, S_DAY2]
+    mean = SessionsForecaster(bin_s=600.0, window_s=600.0, statistic="mean").fit(fitted)
+    # a at 900 (h = 300): 1 waiting; sessions at 400 s stay with S(700)/S(400) = 0.25/0.5, at 40 s with
+    # S(340)/S(40) = 0.75; arrivals 0.5 * 0.25 (history over [600, 900]) + 0.5 * 300 * 3/600 (today's
+    # 3 arrivals in (0, 600]) = 0.875 -> 3.125. b: session at 150 s stays with S(450)/S(150) = 0.5;
+    # arrivals 0.5 * 0 + 0.5 * 300 * 2/600 = 0.5 -> 1.0
+    assert mean.forecast(600.0, [900.0, 900.0], S_TODAY) == pytest.approx([3.125, 1.0])
+    # at the decision time itself: every session stays, nobody arrives: the vehicles there now
+    assert mean.forecast(600.0, [600.0, 600.0], S_TODAY) == pytest.approx([3.0, 1.0])
+    median = SessionsForecaster(bin_s=600.0, window_s=600.0).fit(fitted)
+    # a: 1 + median of Bernoulli(0.5) + Bernoulli(0.75) + Poisson(0.875): P(<= 1) = 0.306, P(<= 2) = 0.665
+    # b: median of Bernoulli(0.5) + Poisson(0.5): P(0) = 0.303, P(<= 1) = 0.758
+    got = median.forecast(600.0, [[900.0, 900.0], [600.0, 600.0]], S_TODAY)
+    assert got.tolist() == [[3.0, 1.0], [3.0, 1.0]]
+    # no recent window: the history alone (a: 1 + 1.25 + 0.25, b: 0.5)
+    history_only = SessionsForecaster(bin_s=600.0, window_s=0.0, statistic="mean").fit(fitted)
+    assert history_only.forecast(600.0, [900.0, 900.0], S_TODAY) == pytest.approx([2.5, 0.5])
+    # a session longer than any training one ends: b's from 150 has charged 850 s at 1000
+    later = sday([("b", 100, 150, None)], 1000.0)
+    assert history_only.forecast(1000.0, [1000.0, 1100.0], later).tolist() == [0.0, 0.0]
+
+
+def test_a_sessions_forecaster_needs_ended_sessions_and_good_settings():
+    with pytest.raises(ValueError, match=r"the sessions forecaster needs training days .* none were given"):
+        make_forecaster("sessions")
+    with pytest.raises(ValueError, match="no charging session that ended"):
+        SessionsForecaster().fit([day([("a", 0, 100)], 1200.0)])
+    with pytest.raises(ValueError, match=r"history_weight=1\.5"):
+        SessionsForecaster(history_weight=1.5)
+    with pytest.raises(ValueError, match="statistic='mode': must be one of median, mean"):
+        make_forecaster("sessions", [S_DAY1], statistic="mode")
+    with pytest.raises(ValueError, match="call fit"):
+        SessionsForecaster().forecast(600.0, [900.0, 900.0], S_TODAY)
+    made = make_forecaster("sessions", [S_DAY1, S_DAY2], bin_s=600.0, window_s=600.0, history_weight=0.0)
+    assert isinstance(made, SessionsForecaster) and made.history_weight == 0.0
+
+
 # ------------------------------------------------------------------------------------------ the interface
 def test_bad_forecast_input_is_refused():
     trend = TrendForecaster()
@@ -184,7 +259,7 @@ def test_make_forecaster_makes_each_by_name_and_refuses_what_it_cannot():
     assert isinstance(trend, TrendForecaster) and trend.window_s == 300.0
     oracle = make_forecaster("oracle", day=TODAY)
     assert isinstance(oracle, OracleForecaster) and oracle.day is TODAY
-    with pytest.raises(ValueError, match="forecaster='arima': must be one of history, trend, anomaly, "):
+    with pytest.raises(ValueError, match="'arima': must be one of history, trend, anomaly, sessions, "):
         make_forecaster("arima")
     with pytest.raises(ValueError, match=r"needs training days .* none were given"):
         make_forecaster("history")

@@ -92,6 +92,26 @@ def test_truncated_is_the_day_as_known_then():
         timeline.truncated(2000.0)
 
 
+def test_the_charging_sessions_are_known_up_to_known_until_and_as_of_a_truncation():
+    # (station, arrival, start, release) read at 1000: a's session from 300 ended at 700; a's from 650 goes
+    # on; b's visit waited from 500 and started at 900; b's start at 1100 is not known yet
+    visits = [("a", 100, 300, 700), ("a", 600, 650, None), ("b", 500, 900, 1500), ("b", 950, 1100, None)]
+    records = [{**record(s, a, r).to_dict(), "start_time": float(t)} for s, a, t, r in visits]
+    records.append(record("a", 800, None).to_dict())  # waiting, never charged
+    timeline = OccupancyTimeline.from_records(records, ("a", "b"), 1000.0)
+    assert sorted(timeline.charge_durations().tolist()) == [400.0]
+    assert [x.tolist() for x in timeline.charging_since(1000.0)] == [[650.0], [900.0]]
+    assert [x.tolist() for x in timeline.charging_since(500.0)] == [[300.0], []]
+    assert [x.tolist() for x in timeline.arrival_times()] == [[100.0, 600.0, 800.0], [500.0, 950.0]]
+    then = timeline.truncated(680.0)  # a's first session still going then, b not started
+    assert then.charge_durations().size == 0
+    assert [x.tolist() for x in then.charging_since(680.0)] == [[300.0, 650.0], []]
+    with pytest.raises(ValueError, match="now=1001"):
+        timeline.charging_since(1001.0)
+    with pytest.raises(ValueError, match=r"start_time=50\.0 of a visit at 'a': must lie between its arrival"):
+        OccupancyTimeline.from_records([{**records[0], "start_time": 50.0}], ("a", "b"), 1000.0)
+
+
 def test_bad_records_and_stations_are_refused():
     with pytest.raises(ValueError, match=r"station 'c': the timeline's stations are \['a', 'b'\]"):
         OccupancyTimeline.from_records([record("c", 10.0, None)], ["a", "b"], 1000.0)
@@ -129,5 +149,9 @@ def test_on_a_real_day_the_timeline_matches_the_controllers_queues(small_scenari
     assert sum(held(3600.0)) > 0  # the day's EVs are at the stations by then
     assert timeline.at(3600.0).tolist() == held(3600.0)
     assert timeline.at(7200.0).tolist() == held(7200.0)
+    for t in (3600.0, 7200.0):  # the sessions in progress are the vehicles on a charging point then
+        charging = [len(states[t]["stations"][sid]["charging"]) for sid in stations]
+        assert [x.size for x in timeline.charging_since(t)] == charging
+    assert timeline.charge_durations().size > 0 and (timeline.charge_durations() > 0).all()
     forecast = OracleForecaster(timeline).forecast(1800.0, [3600.0, 3600.0], timeline.truncated(1800.0))
     assert forecast.dtype == np.float64 and forecast.tolist() == held(3600.0)

@@ -1,5 +1,6 @@
 """scripts/forecast_errors.py end to end on the grid (real Hydra, real SUMO): every forecaster's
-errors by station and hour on the held-out days, the oracle's exactly 0, bad settings refused."""
+errors by station and hour on the held-out days, the oracle's exactly 0, the tuning days with chosen
+settings, bad settings refused."""
 
 from __future__ import annotations
 
@@ -15,9 +16,9 @@ def test_the_forecasters_errors_on_the_held_out_days(script_overrides, tmp_path)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     data = json.loads((out / "forecast_errors.json").read_text())
     assert data["train_days"] == [0, 3] and data["evaluation_days"] == [101]
-    assert set(data["rows"]) == {"now", "history", "trend", "anomaly", "oracle"}
+    assert set(data["rows"]) == {"now", "history", "trend", "anomaly", "sessions", "oracle"}
     assert data["overall_mae"]["oracle"] == 0.0  # the day's own records: a check of the pipeline
-    for name in ("now", "history", "trend", "anomaly"):
+    for name in ("now", "history", "trend", "anomaly", "sessions"):
         rows = data["rows"][name]
         assert rows and all(r["mae"] >= 0 and r["n"] > 0 for r in rows)
         assert {r["hour"] for r in rows} == {6}  # decisions 06:00-06:30
@@ -26,4 +27,27 @@ def test_the_forecasters_errors_on_the_held_out_days(script_overrides, tmp_path)
     proc = run_script("forecast_errors.py", *script_overrides, "forecast.forecasters=[crystal_ball]",
                       f"hydra.run.dir={tmp_path / 'bad'}")  # fmt: skip
     assert proc.returncode == 2
-    assert "choose among history, trend, anomaly, oracle" in proc.stdout + proc.stderr
+    assert "choose among history, trend, anomaly, sessions, oracle" in proc.stdout + proc.stderr
+
+
+def test_the_tuning_days_with_a_forecasters_settings_and_bad_settings_refused(script_overrides, tmp_path):
+    out = tmp_path / "tuning"
+    proc = run_script("forecast_errors.py", *script_overrides, "days.train=[0,3]", "days.tuning=[2]",
+                      "forecast.split=tuning", "forecast.forecasters=[sessions]",
+                      "+forecast.settings.sessions.history_weight=0.25", "forecast.horizons_s=[300]",
+                      f"hydra.run.dir={out}")  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    data = json.loads((out / "forecast_errors.json").read_text())
+    assert data["split"] == "tuning" and data["evaluation_days"] == [2]
+    assert data["settings"] == {"sessions": {"history_weight": 0.25}}
+    assert set(data["rows"]) == {"now", "sessions"} and data["rows"]["sessions"]
+    assert "Tuning days [2]" in (out / "forecast_errors.md").read_text()
+    for override, message in [
+        ("+forecast.settings.sessions.statistic=mode", "statistic='mode': must be one of median, mean"),
+        ("+forecast.settings.trend.window_s=60", "settings go to the forecasters compared, ['sessions']"),
+        ("forecast.split=train", "forecast.split='train': must be one of eval, tuning"),
+    ]:
+        proc = run_script("forecast_errors.py", *script_overrides, "forecast.forecasters=[sessions]",
+                          override, f"hydra.run.dir={tmp_path / 'bad'}")  # fmt: skip
+        assert proc.returncode == 2 and message in proc.stdout + proc.stderr, (override, proc.stderr[-2000:])
+        assert not (tmp_path / "bad" / "forecast_errors.json").exists()

@@ -126,7 +126,8 @@ class FleetEnv(InWorld, ParallelEnv):
         config = EnvConfig(scenario=scenario, departure_window=departure_window, reward=reward, **world)
         if "forecast" in config.observe and config.forecaster["name"] == "oracle":
             raise ValueError("forecaster='oracle' reads the cached background day's future, which the "
-                             "fleet's guided EVs change: use 'history', 'trend' or 'anomaly'")  # fmt: skip
+                             "fleet's guided EVs change: use 'history', 'trend', 'anomaly' or "
+                             "'sessions'")  # fmt: skip
         self.world = World(config)
         m = len(self.stations)
         #: the observation's blocks: ``[D, N, Z, H]`` and the observation options' (e.g. ``"DNZHP"``)
