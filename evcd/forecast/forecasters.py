@@ -48,6 +48,25 @@ def _same_stations(stations: tuple[str, ...], today: OccupancyTimeline, owner: s
     )
 
 
+def training_stations(days: Sequence[OccupancyTimeline], owner: str) -> tuple[str, ...]:
+    """The stations of the training ``days`` of the ``owner`` forecaster (all days must share them).
+
+    Raises:
+        ValueError: no days, or days with other stations.
+    """
+    require(
+        len(days) > 0, f"a {owner} forecaster needs training days (timelines of past days); none were given"
+    )
+    stations = days[0].stations
+    for day in days:
+        require(
+            day.stations == stations,
+            f"training days with stations {list(day.stations)} and "
+            f"{list(stations)}: all days need the same stations",
+        )
+    return stations
+
+
 class Forecaster(ABC):
     """Forecasts the number of vehicles at each station at an EV's arrival time there.
 
@@ -133,16 +152,7 @@ class HistoryForecaster(Forecaster):
                 up to before 0).
         """
         days = list(days)
-        require(
-            bool(days), "a history forecaster needs training days (timelines of past days); none were given"
-        )
-        stations = days[0].stations
-        for day in days:
-            require(
-                day.stations == stations,
-                f"training days with stations {list(day.stations)} and "
-                f"{list(stations)}: all days need the same stations",
-            )
+        stations = training_stations(days, self.name)
         n_bins = max(math.floor(max(d.known_until, 0.0) / self.bin_s) + 1 for d in days)
         sums = np.zeros((n_bins, len(stations)))
         counts = np.zeros(n_bins, dtype=np.int64)
@@ -344,16 +354,7 @@ class SessionsForecaster(Forecaster):
             ValueError: no days, days with other stations, or no charging session that ended in them.
         """
         days = list(days)
-        require(
-            bool(days), "a sessions forecaster needs training days (timelines of past days); none were given"
-        )
-        stations = days[0].stations
-        for day in days:
-            require(
-                day.stations == stations,
-                f"training days with stations {list(day.stations)} and "
-                f"{list(stations)}: all days need the same stations",
-            )
+        stations = training_stations(days, self.name)
         durations = np.sort(np.concatenate([day.charge_durations() for day in days]))
         require(
             durations.size > 0,
