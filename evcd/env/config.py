@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from evcd.env.observation import OPTIONS
-from evcd.forecast.forecasters import FORECASTERS, SETTINGS
+from evcd.forecast.registry import FORECASTERS, SETTINGS
 from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.scenario import JURONG_WEST, Scenario, load_scenario
 from evcd.sim.perturbations import Perturbations

@@ -3,8 +3,9 @@
 - :class:`OccupancyTimeline` (:mod:`~evcd.forecast.timeline`): vehicles at each station over time,
   from the controller's visit records, known up to the time they were read;
 - :class:`Forecaster` and its :class:`HistoryForecaster`, :class:`TrendForecaster`,
-  :class:`AnomalyForecaster`, :class:`SessionsForecaster` and :class:`OracleForecaster`
-  (:mod:`~evcd.forecast.forecasters`), made by name with :func:`make_forecaster`;
+  :class:`AnomalyForecaster` and :class:`OracleForecaster` (:mod:`~evcd.forecast.forecasters`),
+  :class:`SessionsForecaster` (:mod:`~evcd.forecast.sessions`), made by name with
+  :func:`make_forecaster` (:mod:`~evcd.forecast.registry`);
 - :func:`forecast_errors` and :func:`format_mae_table` (:mod:`~evcd.forecast.errors`): a forecaster's
   mean absolute error per station and hour on played days.
 """
@@ -13,15 +14,14 @@ from __future__ import annotations
 
 from evcd.forecast.errors import forecast_errors, format_mae_table
 from evcd.forecast.forecasters import (
-    FORECASTERS,
     AnomalyForecaster,
     Forecaster,
     HistoryForecaster,
     OracleForecaster,
-    SessionsForecaster,
     TrendForecaster,
-    make_forecaster,
 )
+from evcd.forecast.registry import FORECASTERS, make_forecaster
+from evcd.forecast.sessions import SessionsForecaster
 from evcd.forecast.timeline import OccupancyTimeline
 
 __all__ = [

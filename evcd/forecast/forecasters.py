@@ -8,9 +8,10 @@ station and the current day's :class:`~evcd.forecast.timeline.OccupancyTimeline`
 - :class:`TrendForecaster`: a straight line through the current day's last minutes;
 - :class:`AnomalyForecaster`: the history plus today's deviation from it now, shrunk with the horizon
   as the deviations of the training days decayed;
-- :class:`SessionsForecaster`: the vehicles there now, less the charging sessions likely to end before
-  the arrival (given how long each has charged), plus the arrivals expected by then;
 - :class:`OracleForecaster`: the day's own future, an upper bound for analysis only.
+
+The sessions forecaster is in :mod:`~evcd.forecast.sessions`; all are made by name in
+:mod:`~evcd.forecast.registry`.
 
     forecaster = make_forecaster("history", training_days=past_days, bin_s=900.0)
     forecaster.forecast(now, arrival, today)       # arrival: (m,) or (k, m) seconds of the day
@@ -21,12 +22,12 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
 from evcd.forecast.timeline import OccupancyTimeline
-from evcd.utils.validation import check_choice, check_real, require
+from evcd.utils.validation import check_real, require
 
 #: Seconds between two samples of a timeline (history means, trend lines).
 SAMPLE_S = 60.0
@@ -40,7 +41,8 @@ def sample_times(known_until: float, sample_s: float) -> np.ndarray:
     return times[times <= known_until]
 
 
-def _same_stations(stations: tuple[str, ...], today: OccupancyTimeline, owner: str) -> None:
+def same_stations(stations: tuple[str, ...], today: OccupancyTimeline, owner: str) -> None:
+    """Refuse a ``today`` whose stations are not the ``owner`` forecaster's ``stations``."""
     require(
         today.stations == stations,
         f"today's stations {list(today.stations)}: the {owner} forecaster "
@@ -190,7 +192,7 @@ class HistoryForecaster(Forecaster):
     def _predict(self, now: float, arrival: np.ndarray, today: OccupancyTimeline) -> np.ndarray:
         means = self._fitted()
         assert self.stations is not None
-        _same_stations(self.stations, today, self.name)
+        same_stations(self.stations, today, self.name)
         bins = np.clip(np.floor(arrival / self.bin_s), 0, len(means) - 1).astype(np.int64)
         return means[bins, np.arange(arrival.shape[1])]
 
@@ -299,141 +301,6 @@ class AnomalyForecaster(Forecaster):
         return np.maximum(expected + beta * deviation, 0.0)
 
 
-class SessionsForecaster(Forecaster):
-    """The vehicles at the station now, less those whose charging session will likely have ended by the
-    EV's arrival, plus the vehicles expected to arrive by then (what a charge point operator knows: the
-    queue, and when each session in progress began).
-
-    At ``now``, for an arrival ``h = arrival - now`` seconds later at station ``j``:
-
-    - the vehicles waiting there now (no charging point yet) are all still there;
-    - a session in progress for ``e`` seconds is still going with probability ``S(e + h) / S(e)``,
-      ``S(x)`` the share of the training days' charging sessions longer than ``x`` (0 where no
-      training session lasted ``e``);
-    - the vehicles arriving by then are Poisson with mean ``history_weight * A_hist + (1 -
-      history_weight) * A_today``: ``A_hist`` the training days' mean arrivals at ``j`` over
-      ``[now, arrival]`` (a rate per time-of-day bin of ``bin_s``; the last bin's after the last), and
-      ``A_today`` today's rate over the last ``window_s`` (clipped at midnight; the history alone at
-      ``now = 0`` or ``window_s = 0``) times ``h``; each is assumed to stay until the arrival.
-
-    The forecast is the median of that count (``statistic="median"``, the integer that minimises the
-    expected absolute error) or its mean (``"mean"``).
-
-    Args:
-        bin_s: the time-of-day bin of the training days' arrival rate (s), > 0.
-        window_s: the span of today's recent arrivals the current rate is read from (s), >= 0.
-        history_weight: the weight of the training days' rate against today's, in [0, 1].
-        statistic: ``"median"`` or ``"mean"``.
-    """
-
-    name: ClassVar[str] = "sessions"
-    needs_days: ClassVar[bool] = True
-    reads_today: ClassVar[bool] = True
-    STATISTICS: ClassVar[tuple[str, ...]] = ("median", "mean")
-
-    def __init__(
-        self,
-        bin_s: float = 900.0,
-        window_s: float = 3600.0,
-        history_weight: float = 0.5,
-        statistic: str = "median",
-    ) -> None:
-        self.bin_s = check_real("bin_s", bin_s, low=0.0, low_open=True)
-        self.window_s = check_real("window_s", window_s, low=0.0)
-        self.history_weight = check_real("history_weight", history_weight, low=0.0, high=1.0)
-        self.statistic = check_choice("statistic", statistic, self.STATISTICS)
-        self.stations: tuple[str, ...] | None = None
-        self._durations: np.ndarray | None = None  # sorted charging durations of the training days
-        self._rates = np.zeros((1, 0))  # (bins, m) arrivals per second
-        self._cumulative = np.zeros((1, 0))  # (bins, m) expected arrivals before each bin's start
-
-    def fit(self, days: Sequence[OccupancyTimeline]) -> SessionsForecaster:
-        """Learn the charging durations and the arrival rates of ``days``; returns self.
-
-        Raises:
-            ValueError: no days, days with other stations, or no charging session that ended in them.
-        """
-        days = list(days)
-        stations = training_stations(days, self.name)
-        durations = np.sort(np.concatenate([day.charge_durations() for day in days]))
-        require(
-            durations.size > 0,
-            "the training days have no charging session that ended: the sessions forecaster learns "
-            "how long a charge lasts from them",
-        )
-        n_bins = max(math.floor(max(d.known_until, 0.0) / self.bin_s) + 1 for d in days)
-        counts = np.zeros((n_bins, len(stations)))
-        for day in days:
-            for j, times in enumerate(day.arrival_times()):
-                bins = np.clip(np.floor(times / self.bin_s), 0, n_bins - 1).astype(np.int64)
-                np.add.at(counts[:, j], bins, 1.0)
-        self._rates = counts / (self.bin_s * len(days))
-        self._cumulative = np.vstack([np.zeros(len(stations)), np.cumsum(counts / len(days), axis=0)[:-1]])
-        self._durations = durations
-        self.stations = stations
-        return self
-
-    def survival(self, seconds: np.ndarray | float) -> np.ndarray:
-        """``S(x)``: the share of the training days' charging sessions that lasted longer than ``x``."""
-        require(
-            self._durations is not None, "a sessions forecaster needs training days: call fit(days) first"
-        )
-        assert self._durations is not None
-        x = np.asarray(seconds, dtype=np.float64)
-        return 1.0 - np.searchsorted(self._durations, x, side="right") / self._durations.size
-
-    def expected_history_arrivals(self, t: np.ndarray) -> np.ndarray:
-        """The training days' mean arrivals at each station from midnight to ``t`` (shape ``(k, m)``)."""
-        n_bins = len(self._rates)
-        bins = np.clip(np.floor(t / self.bin_s), 0, n_bins - 1).astype(np.int64)
-        columns = np.arange(t.shape[1])
-        into = np.maximum(t - bins * self.bin_s, 0.0)
-        return self._cumulative[bins, columns] + self._rates[bins, columns] * into
-
-    def _predict(self, now: float, arrival: np.ndarray, today: OccupancyTimeline) -> np.ndarray:
-        self.survival(0.0)  # refuses an unfitted forecaster
-        assert self.stations is not None
-        _same_stations(self.stations, today, self.name)
-        horizon = arrival - now
-        since = today.charging_since(now)
-        waiting = today.at(now) - np.array([len(x) for x in since])
-        history = self.expected_history_arrivals(arrival) - self.expected_history_arrivals(
-            np.full_like(arrival, now)
-        )
-        span = min(self.window_s, now)
-        if span > 0:
-            recent = np.array(
-                [np.count_nonzero((a > now - span) & (a <= now)) for a in today.arrival_times()]
-            )
-            expected = self.history_weight * history + (1.0 - self.history_weight) * horizon * recent / span
-        else:  # no recent span to read a rate from: the history alone
-            expected = history
-        out = np.empty_like(arrival)
-        for j, starts in enumerate(since):
-            elapsed = now - starts  # (n,)
-            alive = self.survival(elapsed)
-            later = self.survival(elapsed[None, :] + horizon[:, j, None])  # (k, n)
-            stay = np.where(alive > 0, later / np.where(alive > 0, alive, 1.0), 0.0)
-            for i in range(arrival.shape[0]):
-                out[i, j] = waiting[j] + self._statistic(stay[i], float(expected[i, j]))
-        return out
-
-    def _statistic(self, stay: np.ndarray, mean_arrivals: float) -> float:
-        """The median (or mean) of Bernoulli(``stay``) sessions plus Poisson(``mean_arrivals``) arrivals."""
-        if self.statistic == "mean":
-            return float(stay.sum()) + mean_arrivals
-        pmf = np.ones(1)
-        for p in stay:
-            pmf = np.convolve(pmf, (1.0 - p, p))
-        top = math.ceil(mean_arrivals + 10.0 * math.sqrt(mean_arrivals) + 10.0)
-        poisson = np.empty(top + 1)
-        poisson[0] = math.exp(-mean_arrivals)
-        for n in range(1, top + 1):
-            poisson[n] = poisson[n - 1] * mean_arrivals / n
-        cdf = np.cumsum(np.convolve(pmf, poisson))
-        return float(np.searchsorted(cdf, 0.5 - 1e-12))
-
-
 class OracleForecaster(Forecaster):
     """The day's own future: the exact occupancy at the arrival time (the value at ``day.known_until``
     for later arrivals).
@@ -452,45 +319,5 @@ class OracleForecaster(Forecaster):
         self.day = day
 
     def _predict(self, now: float, arrival: np.ndarray, today: OccupancyTimeline) -> np.ndarray:
-        _same_stations(self.day.stations, today, self.name)
+        same_stations(self.day.stations, today, self.name)
         return self.day.at_each(arrival, clip=True)
-
-
-FORECASTERS: dict[str, type[Forecaster]] = {
-    f.name: f
-    for f in (HistoryForecaster, TrendForecaster, AnomalyForecaster, SessionsForecaster, OracleForecaster)
-}
-#: The settings each forecaster takes by name.
-SETTINGS: dict[str, tuple[str, ...]] = {
-    "history": ("bin_s", "sample_s"),
-    "trend": ("window_s", "sample_s"),
-    "anomaly": ("bin_s", "sample_s", "max_lag_s"),
-    "sessions": ("bin_s", "window_s", "history_weight", "statistic"),
-    "oracle": ("day",),
-}
-
-
-def make_forecaster(
-    name: str, training_days: Sequence[OccupancyTimeline] = (), **settings: Any
-) -> Forecaster:
-    """A forecaster by name: ``"history"``, ``"anomaly"`` or ``"sessions"`` (fitted on
-    ``training_days``), ``"trend"`` or ``"oracle"`` (needs ``day=`` the played day's timeline);
-    ``settings`` go to its constructor.
-
-    Raises:
-        ValueError: an unknown name or setting (listing the allowed ones), ``"history"`` or
-            ``"anomaly"`` without training days, ``"oracle"`` without ``day``.
-    """
-    check_choice("forecaster", name, tuple(FORECASTERS))
-    unknown = sorted(set(settings) - set(SETTINGS[name]))
-    require(not unknown, f"settings {unknown} for the {name} forecaster: it takes {list(SETTINGS[name])}")
-    cls = FORECASTERS[name]
-    if cls.needs_days:
-        require(
-            len(training_days) > 0,
-            f"the {name} forecaster needs training days (timelines of past days); none were given",
-        )
-        return cls(**settings).fit(training_days)  # type: ignore[attr-defined]
-    if name == "oracle":
-        require("day" in settings, "the oracle forecaster needs day= the timeline of the day it plays")
-    return cls(**settings)
