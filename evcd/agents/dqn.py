@@ -215,7 +215,7 @@ class DQNAgent(Agent):
         with ``in_turn``, the rows one after the other (:func:`~evcd.agents.in_turn.learner_tick`)."""
         if self.config.in_turn:  # the fleet's EVs of one tick one after the other
             choose = lambda j, greedy: self._choose(greedy, episodes[j], explore)  # noqa: E731
-            return learner_tick(obs, episodes, self._vehicle, self.q_values, choose, self._push)
+            return learner_tick(obs, episodes, self._vehicle, self.q_values, choose, self._push, self.layout)
         greedy = self.q_values(obs).argmax(axis=-1)
         pairs = zip(greedy, episodes, strict=True)
         return np.array([self._choose(int(g), episode, explore) for g, episode in pairs], dtype=np.int64)

@@ -11,6 +11,12 @@ to station ``i`` and still driving, and estimate the time to the start of chargi
 - :class:`CentralAgent` assigns the EVs deciding at one tick jointly, one after the other, each
   seeing where the ones before it were sent.
 
+Where the observation holds the fleet's ``G`` (``observe=[..., guided_ahead]``: per station, the
+other guided EVs driving there that are due before this one), both count ``G`` instead of ``H``: an EV
+due after this one does not delay it. The central rule then counts an EV it assigns at the tick for
+the EVs after it only where it is due first (its drive time to the station, ``T`` where observed,
+else the queue-aware guess from ``D`` and ``N``, below theirs).
+
 Both take ``switch_margin_s`` (default 0: off): an EV already sent somewhere (or waiting in a car park)
 keeps that station unless another one is estimated to start its charge more than that many seconds
 sooner. EVs that count each other can move away from a station together and back together
@@ -90,14 +96,25 @@ class ReservationAgent(QueueAwareAgent):
 
     def estimate(self, obs: np.ndarray) -> np.ndarray:
         """Estimated seconds to the start of charging at each station (of each row of a batch), the
-        backlog counting ``Z + H``.
+        backlog counting ``Z + H`` (``Z + G`` where the observation holds ``G``).
 
         Raises:
             ValueError: ``obs`` is not ``(4m,)`` or ``(k, 4m)`` (the message names the shape).
         """
-        d, n, z, h = self.read(obs)
-        assert h is not None  # obs_blocks = (4,)
-        return self.score(d, n, z + h, **self.known(obs))
+        d, n, z, _ = self.read(obs)
+        return self.score(d, n, z + self.guided(obs), **self.known(obs))
+
+    def guided(self, obs: np.ndarray) -> np.ndarray:
+        """The other guided EVs this rule counts ahead at each station: ``G`` where the observation
+        holds it, else ``H`` (whole vehicles)."""
+        p = self.physical(obs)
+        return np.rint(p["G"] if "G" in p else p["H"])
+
+    def drive(self, obs: np.ndarray) -> np.ndarray:
+        """The drive time to each station (s): ``T`` where observed, else the queue-aware guess from
+        ``D`` and ``N``."""
+        p = self.physical(obs)
+        return p["T"] if "T" in p else p["D"] / self.speed_mps + p["N"] * self.vehicle_delay_s
 
 
 class CentralAgent(ReservationAgent):
@@ -120,6 +137,11 @@ class CentralAgent(ReservationAgent):
     previous decision, :class:`FleetRuleEpisode`) and, for an EV waiting in a car park, from its
     observation (``D == 0`` there, and it is in that station's ``Z``). With ``switch_margin_s`` an EV
     keeps that station unless another is better by more than the margin (:meth:`keep`).
+
+    With ``G`` in the observation (module docstring) an EV counts ``Z + G`` ahead, and one assigned
+    at the tick counts for a later one only where its drive time there is below the later one's; one
+    leaving the station it was driving to stops counting there likewise (one leaving a car park, for
+    all).
 
     Approximation: at an EV's *first* decision the agent does not know where it was heading (its
     trip's own station, in the others' ``H``), so that station keeps counting it for the EVs assigned
@@ -156,20 +178,28 @@ class CentralAgent(ReservationAgent):
                 f"observations of shape {batch.shape} for {len(episodes)} episodes: one row each"
             )
         k, m = d.shape
-        ahead = z + h  # (k, m): what each EV counts at each station before this tick's assignments
+        ahead = z + self.guided(batch)  # (k, m): what each EV counts before this tick's assignments
         counted = counted_at(d, episodes)
         known = self.known(batch)  # the points in service and route times, where observed
         order = np.argsort(self.score(d, n, ahead, **known).min(axis=1), kind="stable")
-        moved = np.zeros(m)  # vehicles added (+1) and removed (-1) per station by the assignments so far
+        # the assignments so far: (station, when the EV is due there, +1 added / -1 removed); with H
+        # every one counts for everybody after it (due at -inf), with G only for those due later
+        due = self.drive(batch) if "G" in (self.layout or "") else np.full((k, m), -np.inf)
+        moves: list[tuple[int, float, float]] = []
         stations = np.empty(k, dtype=np.int64)
         for j in order:
             row = {key: value[j] for key, value in known.items()}
+            moved = np.zeros(m)
+            for st, when, sign in moves:
+                if when < due[j, st] or when == -np.inf:
+                    moved[st] += sign
             s = self.keep(self.score(d[j], n[j], ahead[j] + moved, **row), int(counted[j]))
             stations[j] = s
-            if counted[j] != s:
-                moved[s] += 1.0
-                if counted[j] >= 0:
-                    moved[counted[j]] -= 1.0
+            c = int(counted[j])
+            if c != s:
+                moves.append((s, float(due[j, s]), 1.0))
+                if c >= 0:
+                    moves.append((c, -np.inf if d[j, c] == 0.0 else float(due[j, c]), -1.0))
         for episode, s in zip(episodes, stations, strict=True):
             episode.station = int(s)
         return stations

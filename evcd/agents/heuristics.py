@@ -202,7 +202,9 @@ class ForecastQueueAgent(QueueAwareAgent):
     there, :mod:`evcd.env.observation`), so that learners face a rule that looks ahead too. It needs
     the environment's ``observe`` to hold ``forecast`` (and reads ``P`` and ``T`` where observed).
     A station whose car park the target is in counts the vehicles there now (the target waits in
-    its queue, ahead of anybody arriving later).
+    its queue, ahead of anybody arriving later). On the fleet with ``G`` observed (the other guided
+    EVs due at each station before this one, ``observe=[..., guided_ahead]``) it counts ``F + G``: the
+    forecast of the station's own queue and the centre's EVs due first.
 
     The constructor takes :class:`QueueAwareAgent`'s arguments.
     """
@@ -222,7 +224,7 @@ class ForecastQueueAgent(QueueAwareAgent):
                 f"(env.observe); this observation's layout is {self.layout or 'DNZ'}"
             )
         d, n, z, _ = self.read(obs)
-        ahead = np.where(d == 0.0, z, p["F"])
+        ahead = np.where(d == 0.0, z, p["F"] + (np.rint(p["G"]) if "G" in p else 0.0))
         return self.score(d, n, ahead, **self.known(obs))
 
 

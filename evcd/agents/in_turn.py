@@ -11,6 +11,12 @@ the observation of each EV for the choices made before it at the same tick:
   waiting in ``c``'s car park: in their ``Z[c]``), that count loses one;
 - an EV that keeps its station changes nothing (it is already counted there).
 
+The fleet's ``G`` (the guided EVs due at a station before this one) follows the same choices where
+the layout also holds ``T`` (an EV's time to each station): an EV sent to ``s`` counts in ``G[s]`` of
+every later EV whose ``T[s]`` is longer than its own ``T[s]``, and one leaving the station ``c`` it was
+heading to leaves ``G[c]`` where it was counted. Without ``T``, ``G`` stays as observed; the other
+options' blocks always do.
+
 Where an EV was counted comes from the dispatcher's memory of where it sent it at its previous
 decision and, for an EV waiting in a car park, from its observation (``D == 0`` there). At an EV's
 first decision the dispatcher does not know where it was heading (its trip's own station, in the
@@ -42,6 +48,7 @@ def decide_in_turn(
     vehicle: np.ndarray,
     order: Sequence[int] | np.ndarray,
     choose: Callable[[int, np.ndarray], int],
+    layout: str = "DNZH",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Decide the rows of ``obs`` one after the other, each on its observation corrected for the
     choices before it (module docstring).
@@ -55,6 +62,8 @@ def decide_in_turn(
             ``1 / points`` for a normalised observation), shape ``(m,)``.
         order: the rows in the order they decide (a permutation of ``range(k)``).
         choose: ``choose(row, seen)`` -> the station of EV ``row`` given the observation it sees.
+        layout: the rows' blocks (:func:`~evcd.env.observation.check_layout`): with ``G`` and ``T``,
+            ``G`` is corrected too (module docstring).
 
     Returns:
         The ``k`` stations (int64) and the observations the EVs decided on (``(k, 4m)``, float32).
@@ -72,18 +81,27 @@ def decide_in_turn(
     waiting = (seen[:, :m] == 0.0).any(axis=1)
     moved_z = np.zeros(m)  # vehicles that left each car park at this tick so far
     moved_h = np.zeros(m)  # guided EVs heading to each station: added (+) and removed (-) so far
+    g, t = (layout.index("G") * m, layout.index("T") * m) if "G" in layout and "T" in layout else (-1, -1)
+    moves: list[tuple[int, float, float]] = []  # G's corrections: (station, the EV's T there, +1 / -1)
     stations = np.empty(k, dtype=np.int64)
     for j in order:
         row = seen[j]
         row[2 * m : 3 * m] = np.maximum(0.0, row[2 * m : 3 * m] + moved_z * vehicle)
         row[3 * m : 4 * m] = np.maximum(0.0, row[3 * m : 4 * m] + moved_h * vehicle)
+        for st, due, sign in moves:
+            if due < row[t + st]:
+                row[g + st] = max(0.0, row[g + st] + sign * vehicle[st])
         s = int(choose(int(j), row))
         stations[j] = s
         c = int(counted[j])
         if c != s:
             moved_h[s] += 1.0
+            if g >= 0:
+                moves.append((s, float(row[t + s]), 1.0))
             if c >= 0:
                 (moved_z if waiting[j] else moved_h)[c] -= 1.0
+                if g >= 0 and not waiting[j]:
+                    moves.append((c, float(row[t + c]), -1.0))
     return stations, seen
 
 
@@ -94,6 +112,7 @@ def learner_tick(
     q_values: Callable[[np.ndarray], np.ndarray],
     choose: Callable[[int, int], int],
     store: Callable[[Any, Any], None],
+    layout: str = "DNZH",
 ) -> np.ndarray:
     """A learner's tick in turn: the rows of ``obs`` (``(k, 4m)``) in order of their best Q-value on
     the tick's observations (the soonest expected charge first; ties to the lower row), each deciding
@@ -107,6 +126,7 @@ def learner_tick(
     Args:
         q_values: the network's Q-values of a row or a batch.
         choose: ``choose(row, greedy)`` -> the action of EV ``row`` (exploration included).
+        layout: the rows' blocks (:func:`decide_in_turn`).
 
     Raises:
         ValueError: ``obs`` is not ``(k, 4m)`` with one row per episode.
@@ -117,7 +137,7 @@ def learner_tick(
     order = np.argsort(-q_values(batch).max(axis=1), kind="stable")
     d = batch[:, : len(vehicle)]
     pick = lambda j, row: choose(j, int(q_values(row).argmax()))  # noqa: E731
-    stations, seen = decide_in_turn(batch, counted_at(d, episodes), vehicle, order, pick)
+    stations, seen = decide_in_turn(batch, counted_at(d, episodes), vehicle, order, pick, layout)
     for episode, s, row in zip(episodes, stations, seen, strict=True):
         episode.station, episode.seen = int(s), row
         if episode.held is not None:

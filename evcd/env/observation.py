@@ -31,12 +31,17 @@ blocks after these, in this order:
 - ``F[i]`` (``forecast``): the forecast number of vehicles at station ``i`` (charging and waiting)
   when the target would get there, now plus ``T[i]`` (at most :data:`FORECAST_HORIZON_S` ahead),
   from the environment's forecaster (:mod:`evcd.forecast`, :mod:`evcd.env.forecast_source`).
+- ``G[i]`` (``guided_ahead``, the fleet's only, :mod:`evcd.env.fleet`): the *other* guided EVs driving
+  to station ``i`` whose estimated time to it (their ``T`` of the station they are sent to) is shorter
+  than this EV's ``T[i]``: the part of the fleet's ``H[i]`` due there before it. The observer computes
+  ``T`` for it (kept in :attr:`Observation.extra`); the fleet, which knows where it sent every EV,
+  adds the block.
 
 A *layout* names the blocks of a vector in order, one letter each: ``"DNZ"`` (this environment),
 ``"DNZH"`` (the fleet's, :mod:`evcd.env.fleet`), then the options' letters (e.g. ``"DNZP"``,
 ``"DNZHPT"``); :func:`check_layout` says which are valid.
 
-With normalisation, ``D`` is in km, ``N`` in tens of vehicles, ``Z`` (and ``H``, ``P``) in multiples of
+With normalisation, ``D`` is in km, ``N`` in tens of vehicles, ``Z`` (and ``H``, ``P``, ``G``) in multiples of
 the station's charging points (``Z``, ``F``: 1 = all points busy, above 1 = a queue; ``P``: 1 = all in
 service) and ``T`` in minutes.
 """
@@ -71,7 +76,9 @@ FLOOR_SHARE = 0.1
 #: The base layouts: the single environment's and the fleet's.
 BASE_LAYOUTS = ("DNZ", "DNZH")
 #: Observation options (``EnvConfig.observe``) and their blocks, in the order the blocks follow the base.
-OPTIONS: dict[str, str] = {"points_in_service": "P", "route_time": "T", "forecast": "F"}
+OPTIONS: dict[str, str] = {"points_in_service": "P", "route_time": "T", "forecast": "F", "guided_ahead": "G"}
+#: The options only the fleet has (its blocks need the other guided EVs; the fleet adds them).
+FLEET_OPTIONS = ("guided_ahead",)
 #: Latest arrival a forecast is asked for, after now (s): beyond an episode's longest trip.
 FORECAST_HORIZON_S = 7200.0
 
@@ -96,6 +103,12 @@ def check_layout(layout: str | int) -> str:
             f"layout {layout!r}: must be 3 / 'DNZ' or 4 / 'DNZH', followed by any of {', '.join(order)} in "
             f"that order (e.g. 'DNZP', 'DNZHPT')"
         )
+    fleet_only = [OPTIONS[o] for o in FLEET_OPTIONS if OPTIONS[o] in rest]
+    if base == "DNZ" and fleet_only:
+        raise ValueError(
+            f"layout {layout!r}: block {fleet_only[0]} ({', '.join(FLEET_OPTIONS)}) counts the fleet's other "
+            "guided EVs: it follows the fleet's 'DNZH' only (evcd.env.fleet); the single target has none"
+        )
     return text
 
 
@@ -118,7 +131,8 @@ class Observation:
     occupancy: np.ndarray  # Z, int
     routes: tuple[tuple[str, ...], ...]  # the route to each station, starting with the current edge
     vector: np.ndarray  # float32 in the observer's layout, normalised if asked
-    extra: Mapping[str, np.ndarray] = field(default_factory=dict)  # the options' blocks, raw, by letter
+    #: the options' blocks, raw, by letter (and ``T`` wherever the observer computed it)
+    extra: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 def unit_divisors(points: Sequence[int] | np.ndarray, layout: str | int = "DNZ") -> np.ndarray:
@@ -163,7 +177,7 @@ def observation_bounds(
         "D": np.full(m, UNREACHABLE_M), "N": np.full(m, MAX_VEHICLES), "H": np.full(m, MAX_VEHICLES),
         "Z": np.array([st.lot_capacity for st in stations], dtype=np.float64),
         "P": np.array([st.points for st in stations], dtype=np.float64), "T": np.full(m, UNREACHABLE_S),
-        "F": np.full(m, MAX_VEHICLES),
+        "F": np.full(m, MAX_VEHICLES), "G": np.full(m, MAX_VEHICLES),
     }  # fmt: skip
     layout = check_layout(layout)
     return np.zeros(len(layout) * m, dtype=np.float32), block_vector(high, layout, stations, normalize)
@@ -178,7 +192,7 @@ class RouteObserver:
         vtype: vehicle type the router plans for (the target's).
         normalize: scale the vector (see the module docstring).
         observe: the observation options (:data:`OPTIONS`: ``points_in_service``, ``route_time``,
-            ``forecast``).
+            ``forecast``; with the fleet's ``guided_ahead`` it makes no block but computes ``T``).
         forecast: with ``forecast``, ``forecast(now, arrival, controller)`` -> the forecast vehicles
             at each station at its ``arrival`` time (a :class:`~evcd.env.forecast_source.ForecastSource`).
     """
@@ -201,7 +215,10 @@ class RouteObserver:
             raise ValueError(
                 f"observe={list(observe)}: unknown option {unknown[0]!r}; the options: {', '.join(OPTIONS)}"
             )
-        self.layout = layout_of("DNZ", observe)
+        #: the blocks this observer makes (the fleet's options' blocks are the fleet's to add)
+        self.layout = layout_of("DNZ", [o for o in observe if o not in FLEET_OPTIONS])
+        #: ``T`` is computed (for ``T``, ``F`` or the fleet's ``G``) and kept in the observations' extra
+        self.times = "T" in self.layout or "F" in self.layout or "guided_ahead" in observe
         if "F" in self.layout and forecast is None:
             raise ValueError("observe=[forecast] needs a forecaster (ChargingNavEnv's forecaster=...)")
         self.forecast = forecast
@@ -260,10 +277,9 @@ class RouteObserver:
         if "P" in self.layout:
             now = api.simulation.getTime()
             extra["P"] = np.array([controller.points_in_service(st.id, now) for st in self.stations])
-        if "T" in self.layout or "F" in self.layout:
+        if self.times:
             times = self._route_times(api, routes, dist, pos)
-            if "T" in self.layout:
-                extra["T"] = times
+            extra["T"] = times
             if "F" in self.layout:
                 assert self.forecast is not None
                 now = api.simulation.getTime()

@@ -94,12 +94,17 @@ class SessionsForecaster(Forecaster):
 
     def survival(self, seconds: np.ndarray | float) -> np.ndarray:
         """``S(x)``: the share of the training days' charging sessions that lasted longer than ``x``."""
+        durations = self._fitted()
+        x = np.asarray(seconds, dtype=np.float64)
+        return 1.0 - np.searchsorted(durations, x, side="right") / durations.size
+
+    def _fitted(self) -> np.ndarray:
+        """The training days' sorted charging durations; refuses a forecaster not fitted yet."""
         require(
             self._durations is not None, "a sessions forecaster needs training days: call fit(days) first"
         )
         assert self._durations is not None
-        x = np.asarray(seconds, dtype=np.float64)
-        return 1.0 - np.searchsorted(self._durations, x, side="right") / self._durations.size
+        return self._durations
 
     def expected_history_arrivals(self, t: np.ndarray) -> np.ndarray:
         """The training days' mean arrivals at each station from midnight to ``t`` (shape ``(k, m)``)."""
@@ -110,7 +115,7 @@ class SessionsForecaster(Forecaster):
         return self._cumulative[bins, columns] + self._rates[bins, columns] * into
 
     def _predict(self, now: float, arrival: np.ndarray, today: OccupancyTimeline) -> np.ndarray:
-        self.survival(0.0)  # refuses an unfitted forecaster
+        self._fitted()
         assert self.stations is not None
         same_stations(self.stations, today, self.name)
         horizon = arrival - now

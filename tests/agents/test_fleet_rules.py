@@ -16,7 +16,13 @@ from evcd.agents import (
     split_observation,
 )
 from evcd.agents.fleet_rules import CentralAgent, CentralEpisode, ReservationAgent
-from evcd.agents.heuristics import FixedStationAgent, GreedyAgent, QueueAwareAgent, RandomAgent
+from evcd.agents.heuristics import (
+    FixedStationAgent,
+    ForecastQueueAgent,
+    GreedyAgent,
+    QueueAwareAgent,
+    RandomAgent,
+)
 from evcd.env.observation import D_SCALE_M, N_SCALE, to_physical, unit_divisors
 
 
@@ -255,6 +261,55 @@ def test_central_frees_the_car_park_place_of_a_waiting_ev_it_moves():
     assert central.decide(np.stack([waiting, driving]), states(central, 2)).tolist() == [0, 1]
     reservation = ReservationAgent(2, np.random.default_rng(0), **kw)
     assert reservation.decide(np.stack([waiting, driving]), states(reservation, 2)).tolist() == [0, 0]
+
+
+def test_with_g_the_rules_count_only_the_guided_evs_due_before_this_one():
+    """Layout ``DNZHG``: reservation counts ``Z + G``. Four EVs head to station 0 (1 km, 100 s), none
+    due before this one: station 0; three due before it: 2 of them wait at its 2 points, 1200 s."""
+    kw = {"points": 2, "speed_mps": 10.0, "vehicle_delay_s": 2.0, "charge_s": 1200.0}
+    reservation = ReservationAgent(2, np.random.default_rng(0), **kw)
+    reservation.layout = "DNZHG"
+    base = fleet_obs([1000.0, 3000.0], [0, 0], [0, 1], [4, 0])
+    first = np.concatenate([base, [0.0, 0.0]]).astype(np.float32)
+    assert reservation.estimate(first).tolist() == pytest.approx([100.0, 300.0])
+    behind = np.concatenate([base, [3.0, 0.0]]).astype(np.float32)
+    assert reservation.estimate(behind).tolist() == pytest.approx([1200.0, 300.0])
+    assert reservation.act(first) == 0 and reservation.act(behind) == 1
+
+
+def test_the_forecast_rule_adds_the_guided_evs_due_first_to_the_forecast():
+    """Layout ``DNZHFG``: queue_forecast counts ``F + G`` (2 points, 1200 s a charge): 1 forecast + 2
+    due first at station 0 = 3 ahead, 1200 s; without ``G`` in the layout, 1 ahead: no wait."""
+    kw = {"points": 2, "speed_mps": 10.0, "vehicle_delay_s": 2.0, "charge_s": 1200.0}
+    base = fleet_obs([1000.0, 3000.0], [0, 0], [0, 0], [2, 0])
+    with_g = ForecastQueueAgent(2, np.random.default_rng(0), **kw)
+    with_g.layout = "DNZHFG"
+    assert with_g.estimate(np.concatenate([base, [1.0, 0.0], [2.0, 0.0]])).tolist() == pytest.approx(
+        [1200.0, 300.0]
+    )
+    without = ForecastQueueAgent(2, np.random.default_rng(0), **kw)
+    without.layout = "DNZHF"
+    assert without.estimate(np.concatenate([base, [1.0, 0.0]])).tolist() == pytest.approx([100.0, 300.0])
+
+
+def test_central_with_g_counts_an_ev_it_assigns_only_for_those_due_after_it():
+    """Three EVs, two one-point stations, nobody there: EV0 (T 100 / 1000 s) takes station 0; EV1
+    (150 / 600) counts it there and takes 1; EV2 (700 / 300) is due at 1 before EV1, so with ``G`` it
+    does not count EV1 there and takes 1 (300 s); with ``H`` it counts everyone assigned before it
+    and breaks the tie of 1200 s to station 0. Without ``T`` the drive guess from ``D`` decides alike."""
+    times = [(100.0, 1000.0), (150.0, 600.0), (700.0, 300.0)]
+
+    def rows(layout: str) -> np.ndarray:
+        out = []
+        for t in times:
+            blocks = {"D": np.array(t) * 10.0, "N": [0, 0], "Z": [0, 0], "H": [0, 0], "T": t, "G": [0, 0]}
+            out.append(np.concatenate([np.asarray(blocks[c], dtype=np.float64) for c in layout]))
+        return np.stack(out).astype(np.float32)
+
+    for layout, expected in (("DNZHTG", [0, 1, 1]), ("DNZHT", [0, 1, 0]), ("DNZHG", [0, 1, 1])):
+        central = CentralAgent(2, np.random.default_rng(0), **ONE_POINT)
+        central.layout = layout
+        assert central.decide(rows(layout), states(central, 3)).tolist() == expected, layout
 
 
 def test_central_checks_one_row_per_episode():

@@ -60,6 +60,27 @@ def test_an_ev_moved_from_where_it_was_counted_leaves_that_count() -> None:
     np.testing.assert_array_equal(seen, obs)
 
 
+def test_g_follows_the_choices_before_an_ev_where_t_says_who_is_due_first() -> None:
+    """Layout ``DNZHTG``: EV 0 (T = 100 s to both) was heading to station 1 and is sent to 0; EV 1 (T
+    = 50 / 300 s) and EV 2 (T = 200 / 200 s) keep station 0. EV 0 is due at 0 after EV 1 (no change
+    in EV 1's G[0]) and before EV 2 (G[0] + 1); it was due at 1 before both (G[1] - 1 for each).
+    Without T in the layout G stays as observed."""
+    go_to_0 = lambda j, row: 0  # noqa: E731
+
+    def row(t: tuple[float, float], g: tuple[float, float]) -> np.ndarray:
+        return np.concatenate([_row(h=(2, 1)), np.array([*t, *g], dtype=np.float32)])
+
+    obs = np.stack([row((100, 100), (0, 0)), row((50, 300), (0, 1)), row((200, 200), (1, 1))])
+    counted = np.array([1, 0, 0])
+    stations, seen = decide_in_turn(obs, counted, np.ones(M), [0, 1, 2], go_to_0, "DNZHTG")
+    assert stations.tolist() == [0, 0, 0]
+    assert seen[1, 3 * M :].tolist() == [3, 0, 50, 300, 0, 0]  # H[0] + 1, H[1] - 1; G[1] - 1
+    assert seen[2, 3 * M :].tolist() == [3, 0, 200, 200, 2, 0]  # G[0] + 1 as well
+    no_t = np.delete(obs, [8, 9], axis=1)
+    _, seen = decide_in_turn(no_t, counted, np.ones(M), [0, 1, 2], go_to_0, "DNZHG")
+    np.testing.assert_array_equal(seen[:, 4 * M :], no_t[:, 4 * M :])
+
+
 def test_normalised_observations_move_by_one_vehicle_in_their_units() -> None:
     points = np.array([2.0, 4.0])
     obs = np.stack([_row(h=(0.5, 0.25))] * 2)

@@ -53,3 +53,37 @@ def heading(
             if driving[ev.vehicle]:
                 counts[ev.station] += 1
     return counts, driving
+
+
+def guided_ahead(
+    guided: Mapping[str, GuidedEV],
+    driving: Mapping[str, bool],
+    times: Mapping[str, np.ndarray],
+    n_stations: int,
+) -> dict[str, np.ndarray]:
+    """Per EV of ``times``, the observation block ``G`` (:mod:`evcd.env.observation`): per station
+    ``i``, the other guided EVs driving to ``i`` whose estimated time to it is shorter than this EV's.
+
+    Args:
+        guided: the episode's guided EVs by vehicle id (``station``: where each was last sent).
+        driving: the guided EVs on their way and whether each is driving (:func:`heading`'s second
+            result): those driving count, the ones waiting in a car park are in ``Z``.
+        times: per EV observed at this tick, its route time to each station (s, ``T``; 0 where it
+            waits). A driving EV's estimated time to its station is its ``T`` there; one not observed
+            (none at a tick, where every EV on its way is an agent) counts as ahead of everybody.
+        n_stations: the number of stations.
+
+    An EV is never ahead of itself (its time to its own station is not shorter than itself).
+    """
+    due: list[list[float]] = [[] for _ in range(n_stations)]
+    for vehicle, is_driving in driving.items():
+        if is_driving:
+            station = guided[vehicle].station
+            due[station].append(float(times[vehicle][station]) if vehicle in times else -np.inf)
+    sorted_due = [np.sort(np.asarray(d, dtype=np.float64)) for d in due]
+    return {
+        vehicle: np.array(
+            [np.searchsorted(sorted_due[i], t[i], side="left") for i in range(n_stations)], dtype=np.int64
+        )
+        for vehicle, t in times.items()
+    }

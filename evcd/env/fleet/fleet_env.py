@@ -27,7 +27,10 @@ Observation per agent: its ``[D, N, Z]`` (:mod:`evcd.env.observation`; ``N`` cou
 EVs too, they are traffic) and ``H``: per station, the *other* guided EVs currently sent there and
 still driving (not yet in its car park; the waiting ones are in ``Z``). With ``normalize_obs``, ``H``
 is in multiples of the station's points, like ``Z``. The observation options (``observe=``: ``P``,
-``T``, ``F``) follow ``H`` as in the single environment, each agent's ``F`` at its own arrival; the
+``T``, ``F``) follow ``H`` as in the single environment, each agent's ``F`` at its own arrival, and
+the fleet's own ``G`` (``guided_ahead``) comes last: per station, the other guided EVs driving there
+that are due before this one (their route time to the station they are sent to shorter than this
+one's ``T`` there; :func:`~evcd.env.fleet.events.guided_ahead`), the part of ``H`` ahead of it. The
 ``history`` forecaster learns the training days' queues, where the charging EVs drive to their own
 stations (nobody dispatches them), and ``oracle`` is refused (the guided EVs change the cached day's
 future). Reward per agent and slot: the single environment's (``"time"`` by default: minus the slot's
@@ -55,8 +58,9 @@ from evcd.env.episode_rules import TIME_EPS, Motion, check_action, slot_end_reas
 from evcd.env.fleet.events import advance, heading
 from evcd.env.fleet.guided import GuidedEV, Stage
 from evcd.env.fleet.measures import FleetMeasures, measure
+from evcd.env.fleet.observe import TickObserver
 from evcd.env.fleet.trips import ChargingTrip, draw_guided, in_window, read_charging_trips
-from evcd.env.observation import Observation, layout_of, observation_bounds, unit_divisors
+from evcd.env.observation import layout_of, observation_bounds
 from evcd.env.reward import Slot
 from evcd.env.target import Target
 from evcd.env.world import InWorld, World
@@ -132,7 +136,6 @@ class FleetEnv(InWorld, ParallelEnv):
         m = len(self.stations)
         #: the observation's blocks: ``[D, N, Z, H]`` and the observation options' (e.g. ``"DNZHP"``)
         self.layout = layout_of("DNZH", config.observe)
-        self._h_units = unit_divisors([st.points for st in self.stations], "DNZH")[3 * m :]
         low, high = observation_bounds(self.stations, config.normalize_obs, self.layout)
         self._obs_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
         self._act_space = gymnasium.spaces.Discrete(m)
@@ -146,6 +149,11 @@ class FleetEnv(InWorld, ParallelEnv):
         self._ended = False
 
     # ------------------------------------------------------------------ the parts
+    @functools.cached_property
+    def _views(self) -> TickObserver:
+        """What the guided EVs observe at a tick."""
+        return TickObserver(self.observer, self.stations, self.layout, self.config.normalize_obs)
+
     @functools.cached_property
     def candidates(self) -> list[list[ChargingTrip]]:
         """Per day (index into ``demand_seeds``): its charging EVs departing in the window (the day's
@@ -409,25 +417,12 @@ class FleetEnv(InWorld, ParallelEnv):
 
     # ------------------------------------------------------------------ observations and rewards
     def _observe(self, agents: Sequence[str]) -> None:
-        """The observations of ``agents`` at this tick (``[D, N, Z]`` plus ``H``)."""
+        """The observations of ``agents`` at this tick (:class:`~evcd.env.fleet.observe.TickObserver`)."""
         if not agents:
             return
         sim = self.simulation
-        ctrl = sim.controller
-        index = {st.id: i for i, st in enumerate(self.stations)}
-        counts, driving = heading(self.guided, ctrl, len(self.stations))
-        for agent in agents:
-            ev = self.guided[agent]
-            record = ctrl.current(agent)
-            at = None if record is None else index[record.station]
-            obs: Observation = self.observer.observe(sim.api, ctrl, ev.road, ev.pos, at)
-            h = counts.copy()
-            if driving.get(agent):
-                h[ev.station] -= 1
-            h_vec = h / self._h_units if self.config.normalize_obs else h.astype(np.float64)
-            base = 3 * len(self.stations)  # [D, N, Z], H, then the options' blocks
-            vector = np.concatenate([obs.vector[:base], h_vec.astype(np.float32), obs.vector[base:]])
-            ev.obs = Observation(obs.distance, obs.vehicles, obs.occupancy, obs.routes, vector, obs.extra)
+        for agent, obs in self._views.observe(sim.api, sim.controller, self.guided, agents).items():
+            self.guided[agent].obs = obs
 
     # ------------------------------------------------------------------ info and checks
     def _info(self, ev: GuidedEV) -> dict[str, Any]:
