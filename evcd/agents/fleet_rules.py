@@ -114,7 +114,7 @@ class ReservationAgent(QueueAwareAgent):
         """The drive time to each station (s): ``T`` where observed, else the queue-aware guess from
         ``D`` and ``N``."""
         p = self.physical(obs)
-        return p["T"] if "T" in p else p["D"] / self.speed_mps + p["N"] * self.vehicle_delay_s
+        return p["T"] if "T" in p else self.guess_drive(p["D"], p["N"])
 
 
 class CentralAgent(ReservationAgent):

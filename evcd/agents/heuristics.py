@@ -165,13 +165,18 @@ class QueueAwareAgent(Agent):
         ``P``; default the stations' points; a station with none is never chosen while another has
         some); ``drive``: the route's travel time (its ``T``; default ``t`` from ``D`` and ``N``)."""
         if drive is None:
-            drive = d / self.speed_mps + n * self.vehicle_delay_s
+            drive = self.guess_drive(d, n)
         k = self.points if points is None else np.asarray(points, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             backlog = np.where(
                 k > 0, np.maximum(0.0, ahead - k + 1.0) * self.charge_s / np.maximum(k, 1.0), CLOSED_S
             )
         return np.maximum(drive, backlog)
+
+    def guess_drive(self, d: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """The drive time ``t = D / speed_mps + N * vehicle_delay_s`` (s) guessed from the physical
+        ``D`` and ``N`` where the observation has no route time ``T``."""
+        return d / self.speed_mps + n * self.vehicle_delay_s
 
     def estimate(self, obs: np.ndarray) -> np.ndarray:
         """Estimated seconds to the start of charging at each station (of each row of a batch),
