@@ -19,7 +19,9 @@
 - The network's input is the observation in physical units (m, vehicles) times :attr:`input_scale`:
   km, tens of vehicles and multiples of the charging points for an agent made for an environment
   (``points``), whether that environment normalises its observations or not (``normalized``); a
-  checkpoint keeps the scale, so a loaded policy always sees what it was trained on.
+  checkpoint keeps the scale, so a loaded policy always sees what it was trained on. With
+  ``rule_estimate`` the network also reads the rule's estimated seconds to each station's start of
+  charging, computed from the observation (:mod:`evcd.agents.rule_input`).
 
 No global random state is touched: the networks are initialised inside ``torch.random.fork_rng``
 from a seed drawn from ``rng``. :meth:`DQNAgent.state_dict` holds everything a resumed run needs.
@@ -53,6 +55,7 @@ from evcd.agents.in_turn import hold, learner_tick
 from evcd.agents.inputs import input_factor, network_input, observation_divisors
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
+from evcd.agents.rule_input import RuleEstimate
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
 from evcd.utils.validation import check_bool, with_overrides
 
@@ -121,10 +124,13 @@ class DQNAgent(Agent):
         self.input_scale = np.ones(self.obs_dim, np.float32) if points is None else 1.0 / self._divisors
         self._set_input_scale(self.input_scale)
         cfg = self.config
+        #: the rule's estimate read beside the observation (rule_estimate), else None
+        self._estimate = RuleEstimate(m, self.layout, points, self.normalized) if cfg.rule_estimate else None
+        net_dim = self.obs_dim + (m if cfg.rule_estimate else 0)
         init_seed = int(rng.integers(2**63 - 1))
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(init_seed)
-            self.online = make_q_network(self.obs_dim, self.n_stations, cfg.hidden, self.dueling, cfg.network)
+            self.online = make_q_network(net_dim, self.n_stations, cfg.hidden, self.dueling, cfg.network)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self.optimizer = torch.optim.Adam(self.online.parameters(), lr=cfg.lr)
         self.replay = PrioritizedReplayBuffer(cfg.buffer_size, self.obs_dim, cfg.alpha, cfg.priority_eps)
@@ -156,8 +162,8 @@ class DQNAgent(Agent):
 
     @classmethod
     def checkpoint_options(cls, policy: Mapping[str, Any]) -> dict[str, Any]:
-        """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of a saved policy and
-        how it decides a fleet tick (``in_turn``).
+        """The network settings (``hidden``, ``network``, ``double``, ``dueling``, ``rule_estimate``) of a
+        saved policy and how it decides a fleet tick (``in_turn``).
 
         Raises:
             CheckpointError: ``policy`` is not a DQN agent's.
@@ -171,7 +177,7 @@ class DQNAgent(Agent):
 
     def __repr__(self) -> str:
         c = self.config
-        turn = ", in turn" if c.in_turn else ""
+        turn = (", in turn" if c.in_turn else "") + (", rule estimate" if c.rule_estimate else "")
         return (f"DQNAgent({self.name}, {c.network} {list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
                 f"buffer={c.buffer_size}, alpha={c.alpha:g}, "
                 f"target_update={c.target_update}{turn})")  # fmt: skip
@@ -199,7 +205,8 @@ class DQNAgent(Agent):
         )
 
     def _input(self, obs: np.ndarray) -> torch.Tensor:
-        return network_input(obs, self._obs_to_input, self.blocks)
+        x = network_input(obs, self._obs_to_input, self.blocks)
+        return x if self._estimate is None else torch.cat([x, torch.from_numpy(self._estimate(obs))], -1)
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         """The online network's Q-values for one observation ``(m,)`` or a batch ``(k, m)``."""
@@ -401,6 +408,7 @@ class DQNAgent(Agent):
             "network": c.network,
             "dueling": self.dueling,
             "double": self.double,
+            "rule_estimate": c.rule_estimate,
         }
         scale = check_policy_state(
             state, self.input_scale, mine, f"layout {self.layout}: {self.blocks} x {self.n_stations} stations"

@@ -57,6 +57,9 @@ class DQNConfig:
             in order of their best Q-value (the soonest expected charge first), each on its
             observation corrected for the stations chosen before it (:mod:`evcd.agents.in_turn`);
             ``False``: side by side on the tick's observations.
+        rule_estimate: the network also reads, per station, the rule's estimated seconds to the start
+            of charging computed from the observation (queue_aware's; reservation's on the fleet), one
+            more block (:mod:`evcd.agents.rule_input`); needs the stations' points.
     """
 
     hidden: tuple[int, ...] = (512, 256)
@@ -85,6 +88,7 @@ class DQNConfig:
     max_grad_norm: float | None = 10.0
     reward_scale: float = 1.0
     in_turn: bool = False
+    rule_estimate: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", check_hidden(self.hidden))
@@ -104,6 +108,7 @@ class DQNConfig:
         check_choice("exploration", self.exploration, EXPLORATIONS)
         check_choice("loss", self.loss, LOSSES)
         check_bool("in_turn", self.in_turn)
+        check_bool("rule_estimate", self.rule_estimate)
         if self.lr_end is not None:
             check_real("lr_end", self.lr_end, low=0.0, low_open=True)
         if self.max_grad_norm is not None:

@@ -57,9 +57,9 @@ def check_policy_state(
 
 
 def policy_settings(agent: Any) -> dict[str, Any]:
-    """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of a saved DQN policy
-    and how it decides a fleet tick (``in_turn``), so that a policy can be rebuilt to load it and act
-    as it was trained.
+    """The network settings (``hidden``, ``network``, ``double``, ``dueling``, ``rule_estimate``) of a
+    saved DQN policy and how it decides a fleet tick (``in_turn``), so that a policy can be rebuilt to
+    load it and act as it was trained.
 
     Raises:
         CheckpointError: ``agent`` is not a DQN agent's state.
@@ -73,9 +73,11 @@ def policy_settings(agent: Any) -> dict[str, Any]:
         "double": bool(saved["double"]),
         "dueling": bool(saved["dueling"]),
         "in_turn": bool(saved.get("in_turn", False)),
+        "rule_estimate": bool(saved["rule_estimate"]),
     }
 
 
 def _network_settings(saved: dict[str, Any]) -> dict[str, Any]:
-    """A saved agent config, with the network a checkpoint made before ``network`` existed holds (the MLP)."""
-    return {"network": "mlp", **saved}
+    """A saved agent config, with the settings a checkpoint made before they existed holds (the MLP, no
+    rule estimate)."""
+    return {"network": "mlp", "rule_estimate": False, **saved}

@@ -1094,6 +1094,7 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
         "double": dueling,
         "dueling": dueling,
         "in_turn": False,
+        "rule_estimate": False,
     }
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")
