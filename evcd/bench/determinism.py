@@ -43,17 +43,19 @@ def read_rows(path: Path) -> list[dict[str, str]]:
 
 def run_digest(run_dir: Path) -> dict[str, Any]:
     """A run's episode rows per file, its transition count, the digest of its final agent state
-    (``None`` for a rule, which has no checkpoint) and the one of the policy it evaluated (any
-    learner's: ``results.json``'s ``training.policy_sha256``)."""
+    (``None`` for a rule, which has no checkpoint), the one of the policy it evaluated (any
+    learner's: ``results.json``'s ``training.policy_sha256``) and the machine it ran on (not
+    compared: both runs of the suite run on one)."""
     run_dir = Path(run_dir)
     files = {p.name: read_rows(p) for p in sorted(run_dir.glob("*episodes.csv"))}
     agent = None
     if (run_dir / CHECKPOINTS).is_dir():
         agent = state_sha256(load_checkpoint(run_dir / CHECKPOINTS)["agent"])
     results = run_dir / "results.json"
-    training = json.loads(results.read_text()).get("training", {}) if results.is_file() else {}
+    data = json.loads(results.read_text()) if results.is_file() else {}
+    training = data.get("training", {})
     return {"files": files, "transitions": training.get("transitions"), "agent_sha256": agent,
-            "policy_sha256": training.get("policy_sha256")}  # fmt: skip
+            "policy_sha256": training.get("policy_sha256"), "machine": data.get("machine")}  # fmt: skip
 
 
 def first_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> str | None:
@@ -87,4 +89,6 @@ def compare_runs(a: Path, b: Path) -> dict[str, Any]:
         "transitions": [da["transitions"], db["transitions"]],
         "policy_sha256": [da["policy_sha256"], db["policy_sha256"]],
         "agent_sha256": [da["agent_sha256"], db["agent_sha256"]],
+        # a policy digest holds on the machine that made it: its CPU and kernels, its packages
+        "machine": da["machine"],
     }

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from evcd.env.runners.base import EpisodeRow
+from evcd.loops.machine import machine_record
 from evcd.loops.stats import EvalResult
 from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
 
@@ -95,7 +96,8 @@ def write_episodes_csv(result: EvalResult, path: str | Path, overwrite: bool = F
 
 def results_dict(result: EvalResult, config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The content of ``results.json``: task, agent, seed, summary, per-episode rows, optional config,
-    and the agent's own extras (:attr:`EvalResult.extra`, e.g. ``hindsight``)."""
+    the agent's own extras (:attr:`EvalResult.extra`, e.g. ``hindsight``) and the machine the numbers
+    were computed on (:func:`~evcd.loops.machine.machine_record`)."""
     return json_floats(
         {
             "task": result.task,
@@ -105,6 +107,7 @@ def results_dict(result: EvalResult, config: Mapping[str, Any] | None = None) ->
             "episodes": [r.row() for r in result.rows],
             "config": dict(config) if config is not None else None,
             **result.extra,
+            "machine": machine_record(),
         }
     )
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +88,10 @@ def test_the_suite_trains_twice_in_fresh_processes_and_finds_them_identical(scri
     assert report["transitions"][0] == report["transitions"][1] > 0
     assert report["policy_sha256"][0] == report["policy_sha256"][1] is not None
     assert report["agent_sha256"][0] == report["agent_sha256"][1]
+    # the digest is named with the machine that made it (torch's kernels, one thread, the packages)
+    machine = report["machine"]
+    assert machine["cpu_capability"] == torch.backends.cpu.get_cpu_capability()
+    assert machine["torch_threads"] == 1 and machine["packages"]["libsumo"] == version("libsumo")
 
 
 def test_overrides_are_refused_outside_the_determinism_suite(tmp_path):
