@@ -3,10 +3,10 @@ kernels use on it, torch's threads, and the versions of the packages that shape 
 
 A run is a function of its settings and its seed on one machine (README "Same seed, same result"), but
 a learner's numbers also depend on how its floating-point kernels round, and torch picks its kernels
-by the CPU's instruction set: the same seed and packages gave another policy on an AVX-512 CPU than on
-the machines before it, and another again on that CPU with ``ATEN_CPU_CAPABILITY=avx2``, while the
-rules' episodes of those runs were identical. Recording the machine with the numbers lets a reader
-tell a difference of machine from a difference of code.
+by the CPU's instruction set: the same seed and code gave another policy on an AVX-512 CPU than on the
+machines before it (whose CPUs and package versions were not recorded), and on that CPU
+``ATEN_CPU_CAPABILITY=avx2`` alone gave another again, while the rules' episodes were identical.
+Recording the machine with the numbers lets a reader tell a difference of machine from one of code.
 """
 
 from __future__ import annotations
