@@ -17,8 +17,6 @@ import platform
 from pathlib import Path
 from typing import Any
 
-import torch
-
 #: The packages whose versions shape a run's numbers.
 PACKAGES = ("torch", "numpy", "eclipse-sumo", "libsumo", "sumolib", "gymnasium", "hydra-core")
 #: Environment variables that change which kernels torch and its BLAS use.
@@ -51,6 +49,8 @@ def machine_record() -> dict[str, Any]:
     """The machine a run's numbers come from: ``cpu`` (model name), ``cpu_capability`` (the instruction
     set torch's CPU kernels use, e.g. ``AVX512``), ``torch_threads``, ``platform``, ``python``,
     ``packages`` (:data:`PACKAGES`' versions) and the :data:`KERNEL_VARIABLES` that are set."""
+    import torch  # here: reading results (evcd.report) must not pay for torch (tests/test_layering.py)
+
     return {
         "cpu": cpu_model(),
         "cpu_capability": torch.backends.cpu.get_cpu_capability(),
