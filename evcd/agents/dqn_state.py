@@ -72,12 +72,12 @@ def policy_settings(agent: Any) -> dict[str, Any]:
         "network": str(saved["network"]),
         "double": bool(saved["double"]),
         "dueling": bool(saved["dueling"]),
-        "in_turn": bool(saved.get("in_turn", False)),
+        "in_turn": bool(saved["in_turn"]),
         "rule_estimate": bool(saved["rule_estimate"]),
     }
 
 
 def _network_settings(saved: dict[str, Any]) -> dict[str, Any]:
-    """A saved agent config, with the settings a checkpoint made before they existed holds (the MLP, no
-    rule estimate)."""
-    return {"network": "mlp", "rule_estimate": False, **saved}
+    """A saved agent config, with the settings a checkpoint made before they existed holds (the MLP,
+    side by side, no rule estimate)."""
+    return {"network": "mlp", "in_turn": False, "rule_estimate": False, **saved}
