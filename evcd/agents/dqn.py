@@ -21,7 +21,9 @@
   (``points``), whether that environment normalises its observations or not (``normalized``); a
   checkpoint keeps the scale, so a loaded policy always sees what it was trained on. With
   ``rule_estimate`` the network also reads the rule's estimated seconds to each station's start of
-  charging, computed from the observation (:mod:`evcd.agents.rule_input`).
+  charging, computed from the observation (:mod:`evcd.agents.rule_input`); with ``rule_prior`` the
+  Q-value is that estimate as a return plus the network's output, zero at first (:mod:`evcd.agents.
+  rule_prior`).
 
 No global random state is touched: the networks are initialised inside ``torch.random.fork_rng``
 from a seed drawn from ``rng``. :meth:`DQNAgent.state_dict` holds everything a resumed run needs.
@@ -50,12 +52,13 @@ from evcd.agents.base import (
 )
 from evcd.agents.dqn_config import DQNConfig, linear_schedule
 from evcd.agents.dqn_episode import DQNEpisode
-from evcd.agents.dqn_state import STATE_FORMAT, check_policy_state, policy_settings
+from evcd.agents.dqn_state import CHECKED_SETTINGS, STATE_FORMAT, check_policy_state, policy_settings
 from evcd.agents.in_turn import hold, learner_tick
 from evcd.agents.inputs import input_factor, network_input, observation_divisors
 from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
 from evcd.agents.rule_input import RuleEstimate
+from evcd.agents.rule_prior import prior_network
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
 from evcd.utils.validation import check_bool, with_overrides
 
@@ -80,12 +83,13 @@ class DQNAgent(Agent):
         obs_blocks: 3 for ``[D, N, Z]``, 4 for the fleet's ``[D, N, Z, H]`` (one network for all its EVs),
             or a layout's letters with the observation options' blocks (e.g. ``"DNZP"``).
         checkpoint: load this checkpoint's policy (a training checkpoint or run directory) after building.
+        decision_interval, reward: the environment's slot (s) and reward name, for ``rule_prior``.
     """
 
     learns = True
     obs_blocks = (3, 4)
     options: ClassVar[Mapping[str, Any]] = {"double": False, "dueling": False, "checkpoint": None}
-    env_options = ("points", "normalized", "obs_blocks")
+    env_options = ("points", "normalized", "obs_blocks", "decision_interval", "reward")
     learner_block = True
 
     def __init__(
@@ -100,6 +104,8 @@ class DQNAgent(Agent):
         normalized: bool = False,
         obs_blocks: int | str = 3,
         checkpoint: str | Path | None = None,
+        decision_interval: float | None = None,
+        reward: object = None,
         **hyperparameters: Any,
     ) -> None:
         super().__init__(n_stations, rng)
@@ -110,11 +116,9 @@ class DQNAgent(Agent):
         self.blocks = len(self.layout)
         self.obs_dim = self.blocks * self.n_stations
         if self.config.in_turn and "H" not in self.layout:
-            raise ValueError(
-                f"in_turn=True with observations {self.layout} ({self.blocks} blocks): in_turn is the "
-                "fleet's (task=fleet, [D, N, Z, H]: the EVs of one tick decide one after the other); the "
-                "single environment has one EV (in_turn=false)"
-            )
+            raise ValueError(f"in_turn=True with observations {self.layout} ({self.blocks} blocks): in_turn "
+                             "is the fleet's (task=fleet, [D, N, Z, H]: the EVs of one tick decide one after "
+                             "the other); the single environment has one EV (in_turn=false)")  # fmt: skip
         self.normalized = check_bool("normalized", normalized)
         self._divisors = observation_divisors(points, self.n_stations, self.layout, self.normalized)
         m = self.n_stations
@@ -125,12 +129,15 @@ class DQNAgent(Agent):
         self._set_input_scale(self.input_scale)
         cfg = self.config
         #: the rule's estimate read beside the observation (rule_estimate), else None
-        self._estimate = RuleEstimate(m, self.layout, points, self.normalized) if cfg.rule_estimate else None
+        reads = cfg.rule_estimate or cfg.rule_prior
+        self._estimate = RuleEstimate(m, self.layout, points, self.normalized) if reads else None
         net_dim = self.obs_dim + (m if cfg.rule_estimate else 0)
         init_seed = int(rng.integers(2**63 - 1))
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(init_seed)
             self.online = make_q_network(net_dim, self.n_stations, cfg.hidden, self.dueling, cfg.network)
+        if cfg.rule_prior:  # the network becomes the correction to the rule's return
+            self.online = prior_network(self.online, m, cfg, decision_interval, reward)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self.optimizer = torch.optim.Adam(self.online.parameters(), lr=cfg.lr)
         self.replay = PrioritizedReplayBuffer(cfg.buffer_size, self.obs_dim, cfg.alpha, cfg.priority_eps)
@@ -151,8 +158,11 @@ class DQNAgent(Agent):
 
     @classmethod
     def env_kwargs(cls, env: Any) -> dict[str, Any]:
-        """The env's charging points, whether it normalises, and its observation's blocks (3 or 4)."""
-        return {**observation_units(env), "obs_blocks": observation_letters(env)}
+        """The env's charging points, whether it normalises, its observation's blocks, slot and reward
+        (``None`` where its config has none: ``rule_prior`` then refuses)."""
+        get = lambda key: getattr(env.unwrapped.config, key, None)  # noqa: E731
+        return {**observation_units(env), "obs_blocks": observation_letters(env),
+                "decision_interval": get("decision_interval"), "reward": get("reward")}  # fmt: skip
 
     @classmethod
     def option_names(cls) -> list[str]:
@@ -177,7 +187,8 @@ class DQNAgent(Agent):
 
     def __repr__(self) -> str:
         c = self.config
-        turn = (", in turn" if c.in_turn else "") + (", rule estimate" if c.rule_estimate else "")
+        switches = ("in_turn", "rule_estimate", "rule_prior")
+        turn = "".join(f", {n.replace('_', ' ')}" for n in switches if getattr(c, n))
         return (f"DQNAgent({self.name}, {c.network} {list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
                 f"buffer={c.buffer_size}, alpha={c.alpha:g}, "
                 f"target_update={c.target_update}{turn})")  # fmt: skip
@@ -339,10 +350,7 @@ class DQNAgent(Agent):
         tau = self.config.tau
         with torch.no_grad():
             for t, o in zip(self.target.parameters(), self.online.parameters(), strict=True):
-                if tau >= 1.0:
-                    t.copy_(o)
-                else:
-                    t.lerp_(o, tau)
+                t.copy_(o) if tau >= 1.0 else t.lerp_(o, tau)
         self.target_updates += 1
 
     def stats(self) -> dict[str, float]:
@@ -381,16 +389,19 @@ class DQNAgent(Agent):
     def policy_state_dict(self) -> dict[str, Any]:
         """The part of :meth:`state_dict` that ``load_state_dict(..., policy_only=True)`` reads: the
         networks, their input scale and the settings it checks (no optimizer, no replay)."""
-        config = {**asdict(self.config), "double": self.double, "dueling": self.dueling}
-        config["hidden"] = list(config["hidden"])
         return {
             "format": STATE_FORMAT,
             "n_stations": self.n_stations,
-            "config": config,
+            "config": self._saved_config(),
             "input_scale": torch.from_numpy(self.input_scale.copy()),
             "online": copy.deepcopy(self.online.state_dict()),
             "target": copy.deepcopy(self.target.state_dict()),
         }
+
+    def _saved_config(self) -> dict[str, Any]:
+        """The hyperparameters and switches as a checkpoint keeps them."""
+        return {**asdict(self.config), "hidden": list(self.config.hidden), "double": self.double,
+                "dueling": self.dueling}  # fmt: skip
 
     def load_state_dict(self, state: Mapping[str, Any], policy_only: bool = False) -> None:  # type: ignore[override]
         """Restore :meth:`state_dict` (``policy_only``: just the networks and their input scale).
@@ -402,14 +413,7 @@ class DQNAgent(Agent):
             CheckpointError: the state is not a DQN agent's, or was made for another observation
                 size, number of stations, network or switch setting (the message names it).
         """
-        c = self.config
-        mine = {
-            "hidden": list(c.hidden),
-            "network": c.network,
-            "dueling": self.dueling,
-            "double": self.double,
-            "rule_estimate": c.rule_estimate,
-        }
+        mine = {key: self._saved_config()[key] for key in CHECKED_SETTINGS}
         scale = check_policy_state(
             state, self.input_scale, mine, f"layout {self.layout}: {self.blocks} x {self.n_stations} stations"
         )

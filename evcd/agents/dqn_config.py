@@ -60,6 +60,9 @@ class DQNConfig:
         rule_estimate: the network also reads, per station, the rule's estimated seconds to the start
             of charging computed from the observation (queue_aware's; reservation's on the fleet), one
             more block (:mod:`evcd.agents.rule_input`); needs the stations' points.
+        rule_prior: the Q-value is that estimate turned into the discounted return of the ``"time"``
+            reward plus the network's output, which starts at zero (:mod:`evcd.agents.rule_prior`):
+            the untrained learner decides as the rule; needs the stations' points.
     """
 
     hidden: tuple[int, ...] = (512, 256)
@@ -89,6 +92,7 @@ class DQNConfig:
     reward_scale: float = 1.0
     in_turn: bool = False
     rule_estimate: bool = False
+    rule_prior: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", check_hidden(self.hidden))
@@ -109,6 +113,7 @@ class DQNConfig:
         check_choice("loss", self.loss, LOSSES)
         check_bool("in_turn", self.in_turn)
         check_bool("rule_estimate", self.rule_estimate)
+        check_bool("rule_prior", self.rule_prior)
         if self.lr_end is not None:
             check_real("lr_end", self.lr_end, low=0.0, low_open=True)
         if self.max_grad_norm is not None:

@@ -16,6 +16,8 @@ import numpy as np
 from evcd.utils.checkpoint import CheckpointError, to_numpy
 
 STATE_FORMAT = "evcd.agents.dqn/2"
+#: the settings a checkpoint's networks must share with the agent that loads them
+CHECKED_SETTINGS = ("hidden", "network", "dueling", "double", "rule_estimate", "rule_prior")
 
 
 def check_policy_state(
@@ -57,9 +59,9 @@ def check_policy_state(
 
 
 def policy_settings(agent: Any) -> dict[str, Any]:
-    """The network settings (``hidden``, ``network``, ``double``, ``dueling``, ``rule_estimate``) of a
-    saved DQN policy and how it decides a fleet tick (``in_turn``), so that a policy can be rebuilt to
-    load it and act as it was trained.
+    """The network settings (``hidden``, ``network``, ``double``, ``dueling``, ``rule_estimate``,
+    ``rule_prior``) of a saved DQN policy and how it decides a fleet tick (``in_turn``), so that a
+    policy can be rebuilt to load it and act as it was trained.
 
     Raises:
         CheckpointError: ``agent`` is not a DQN agent's state.
@@ -74,10 +76,11 @@ def policy_settings(agent: Any) -> dict[str, Any]:
         "dueling": bool(saved["dueling"]),
         "in_turn": bool(saved["in_turn"]),
         "rule_estimate": bool(saved["rule_estimate"]),
+        "rule_prior": bool(saved["rule_prior"]),
     }
 
 
 def _network_settings(saved: dict[str, Any]) -> dict[str, Any]:
     """A saved agent config, with the settings a checkpoint made before they existed holds (the MLP,
-    side by side, no rule estimate)."""
-    return {"network": "mlp", "in_turn": False, "rule_estimate": False, **saved}
+    side by side, no rule estimate nor prior)."""
+    return {"network": "mlp", "in_turn": False, "rule_estimate": False, "rule_prior": False, **saved}

@@ -1095,6 +1095,7 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
         "dueling": dueling,
         "in_turn": False,
         "rule_estimate": False,
+        "rule_prior": False,
     }
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")

@@ -122,14 +122,19 @@ def test_train_a_fleet_then_evaluate_its_policy(small, script_overrides, tmp_pat
     assert proc.returncode == 2 and "that run is complete" in proc.stdout + proc.stderr
 
 
-@pytest.mark.parametrize("estimate", [False, True], ids=["observation", "rule_estimate"])
-def test_a_policy_trained_in_turn_is_evaluated_in_turn(small, script_overrides, tmp_path, estimate):
+@pytest.mark.parametrize(
+    ("estimate", "prior"), [(False, False), (True, False), (True, True)],
+    ids=["observation", "rule_estimate", "rule_prior"],
+)  # fmt: skip
+def test_a_policy_trained_in_turn_is_evaluated_in_turn(small, script_overrides, tmp_path, estimate, prior):
     run = tmp_path / "run"
     proc = run_script("train.py", *small, "agent=dqn", "learner.in_turn=true", "eval.baselines=[]",
-                      f"learner.rule_estimate={estimate}", f"hydra.run.dir={run}")  # fmt: skip
+                      f"learner.rule_estimate={estimate}", f"learner.rule_prior={prior}",
+                      f"hydra.run.dir={run}")  # fmt: skip
     log = proc.stdout + proc.stderr
     assert proc.returncode == 0, log[-3000:]
-    assert ("target_update=20, in turn, rule estimate)" if estimate else "target_update=20, in turn)") in log
+    settings = "in turn" + (", rule estimate" if estimate else "") + (", rule prior" if prior else "")
+    assert f"target_update=20, {settings})" in log
     data = json.loads((run / "results.json").read_text())
     out = tmp_path / "eval"
     proc = run_script("evaluate.py", *script_overrides, "task=fleet", "evs=300",
@@ -139,7 +144,7 @@ def test_a_policy_trained_in_turn_is_evaluated_in_turn(small, script_overrides, 
     log = proc.stdout + proc.stderr
     assert proc.returncode == 0, log[-3000:]
     # the checkpoint says how its policy decides a tick and what its network reads (not the learner block)
-    assert ("in turn, rule estimate)" if estimate else "in turn)") in log
+    assert f"{settings})" in log
     again = json.loads((out / "results.json").read_text())
     assert again["summary"]["guided_travel"] == pytest.approx(data["summary"]["guided_travel"])
 
