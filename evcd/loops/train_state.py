@@ -188,7 +188,9 @@ def check_run_dir(run_dir: Path, resume: bool) -> None:
 
 def config_diff(saved: Mapping[str, Any], current: Mapping[str, Any], prefix: str = "") -> list[str]:
     """``"key: saved -> current"`` for every setting that differs (nested keys dotted), but those of
-    :data:`RESUME_FREE_KEYS`."""
+    :data:`RESUME_FREE_KEYS` and a setting the saved run did not have that is off now (``false``,
+    ``null`` or ``[]``): an option added to evcd since the checkpoint, at the value that keeps what
+    the run did (evcd's options are off by default)."""
     keys = sorted(set(saved) | set(current))
     out = []
     for key in keys:
@@ -196,11 +198,19 @@ def config_diff(saved: Mapping[str, Any], current: Mapping[str, Any], prefix: st
         if not prefix and key in RESUME_FREE_KEYS:
             continue
         a, b = saved.get(key, "<missing>"), current.get(key, "<missing>")
+        if key not in saved and _is_off(b):
+            log.info("resume: %s=%r is new since the checkpoint's run; off, as that run was", name, b)
+            continue
         if isinstance(a, Mapping) and isinstance(b, Mapping):
             out += config_diff(a, b, f"{name}.")
         elif a != b:
             out.append(f"{name}: {a!r} -> {b!r}")
     return out
+
+
+def _is_off(value: Any) -> bool:
+    """``False``, ``None`` or an empty list: an option that is off."""
+    return value is False or value is None or (isinstance(value, list | tuple) and not value)
 
 
 def save_training(run_dir: Path, agent: Agent, state: SavedState, config: Mapping[str, Any] | None) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import subprocess
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from evcd.loops.run_files import CHECKPOINTS, RESULTS_JSON, TRAIN_CSV
 from evcd.loops.seeds import EVAL_STREAM, TRAIN_STREAM, VALIDATION_STREAM, bootstrap_rng, episode_specs
 from evcd.loops.stats import paired_difference
 from evcd.loops.train import TrainSettings, train_and_evaluate, training_specs
-from evcd.loops.train_state import check_run_dir
+from evcd.loops.train_state import check_run_dir, restore_training
 from evcd.loops.validation import ValidationSettings
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint
 from tests.agents.toy_env import ToyDispatchEnv, greedy_travel, optimal_travel
@@ -261,6 +262,16 @@ def test_resume_with_other_settings_is_refused(trained, tmp_path):
     other = {**CONFIG, "learner": {"lr": 0.5}}
     with pytest.raises(ValueError, match=r"learner\.lr: 0\.001 -> 0\.5"):
         train_and_evaluate(learner(), toy_runners, settings(), run_dir, resume=True, config=other)
+
+    # a setting the run did not have (added to evcd since): refused where it is on, not where it is off
+    def added(value):
+        return {**CONFIG, "learner": {**CONFIG["learner"], "new_option": value}}
+
+    for on in (True, 1, ["P"], "x"):
+        with pytest.raises(ValueError, match=rf"learner\.new_option: '<missing>' -> {re.escape(repr(on))}"):
+            restore_training(run_dir, learner(), added(on))
+    for off in (False, None, []):
+        assert restore_training(run_dir, learner(), added(off)).episodes_done == 10
 
 
 def test_a_run_directory_is_never_reused_or_overwritten(trained, tmp_path):
