@@ -8,7 +8,7 @@ what it holds without building anything.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -16,8 +16,20 @@ import numpy as np
 from evcd.utils.checkpoint import CheckpointError, to_numpy
 
 STATE_FORMAT = "evcd.agents.dqn/2"
-#: the settings a checkpoint's networks must share with the agent that loads them
-CHECKED_SETTINGS = ("hidden", "network", "dueling", "double", "rule_estimate", "rule_prior")
+#: the saved policy settings: how each is read back, and, for those added after the format, the value a
+#: checkpoint made before it holds (the MLP, side by side, no rule estimate nor prior)
+_SETTINGS: dict[str, tuple[Callable[[Any], Any], tuple[Any, ...]]] = {
+    "hidden": (tuple, ()),
+    "network": (str, ("mlp",)),
+    "dueling": (bool, ()),
+    "double": (bool, ()),
+    "in_turn": (bool, (False,)),
+    "rule_estimate": (bool, (False,)),
+    "rule_prior": (bool, (False,)),
+}
+#: the settings a checkpoint's networks must share with the agent that loads them (all but how it
+#: decides a fleet tick)
+CHECKED_SETTINGS = tuple(key for key in _SETTINGS if key != "in_turn")
 
 
 def check_policy_state(
@@ -69,18 +81,10 @@ def policy_settings(agent: Any) -> dict[str, Any]:
     if not isinstance(agent, Mapping) or agent.get("format") != STATE_FORMAT:
         raise CheckpointError("the checkpoint does not hold a DQN agent")
     saved = _network_settings(agent["config"])
-    return {
-        "hidden": tuple(saved["hidden"]),
-        "network": str(saved["network"]),
-        "double": bool(saved["double"]),
-        "dueling": bool(saved["dueling"]),
-        "in_turn": bool(saved["in_turn"]),
-        "rule_estimate": bool(saved["rule_estimate"]),
-        "rule_prior": bool(saved["rule_prior"]),
-    }
+    return {key: read(saved[key]) for key, (read, _) in _SETTINGS.items()}
 
 
 def _network_settings(saved: dict[str, Any]) -> dict[str, Any]:
-    """A saved agent config, with the settings a checkpoint made before they existed holds (the MLP,
-    side by side, no rule estimate nor prior)."""
-    return {"network": "mlp", "in_turn": False, "rule_estimate": False, "rule_prior": False, **saved}
+    """A saved agent config, with the settings a checkpoint made before they existed holds
+    (:data:`_SETTINGS`)."""
+    return {**{key: old[0] for key, (_, old) in _SETTINGS.items() if old}, **saved}
