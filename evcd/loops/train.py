@@ -151,6 +151,8 @@ def train_episodes(
     state.sessions += 1
     saved = state.episodes_done  # the position of the checkpoint this session started from
     tlog.start(agent.stats())
+    if validator is not None and settings.validation.due_at_start(state.episodes_done, state.validation):
+        _validate(agent, validator, settings, run_dir, state, tlog)
     played = runner()
     try:
         t0 = time.perf_counter()
@@ -173,11 +175,7 @@ def train_episodes(
             played.run(specs[start:stop], agent, explore=True, learn=True, on_episode=on_episode)
             if validator is not None and validator.due(state.episodes_done, episodes):
                 played.close()  # one simulation per process: the next call starts its own again
-                t1 = time.perf_counter()
-                validator.validate(agent, state.episodes_done, state.transitions, state.validation)
-                state.validation_s += time.perf_counter() - t1
-                tlog.validation(state.validation, state.transitions)
-                keep_if_best(run_dir, agent, settings.validation, state.validation)
+                _validate(agent, validator, settings, run_dir, state, tlog)
             tlog.flush()
             save_training(run_dir, agent, state, config)
             saved = state.episodes_done
@@ -189,6 +187,22 @@ def train_episodes(
     finally:
         bar.close()
         played.close()
+
+
+def _validate(
+    agent: Agent,
+    validator: Validator,
+    settings: TrainSettings,
+    run_dir: Path,
+    state: TrainState,
+    tlog: TrainLog,
+) -> None:
+    """Validate the policy now (no simulation of the training may be open), log it and keep it if best."""
+    t1 = time.perf_counter()
+    validator.validate(agent, state.episodes_done, state.transitions, state.validation)
+    state.validation_s += time.perf_counter() - t1
+    tlog.validation(state.validation, state.transitions)
+    keep_if_best(run_dir, agent, settings.validation, state.validation)
 
 
 # ---------------------------------------------------------------------------------------- the whole run

@@ -50,8 +50,8 @@ def fleet(make_small_fleet) -> Fleet:
     return Fleet(train=env, eval=env, validation=env)
 
 
-def _agent(env: Any, name: str = "dueling_ddqn") -> Any:
-    return make_agent_for_env(name, env, np.random.default_rng(7), config=CONFIG)
+def _agent(env: Any, name: str = "dueling_ddqn", config: DQNConfig = CONFIG) -> Any:
+    return make_agent_for_env(name, env, np.random.default_rng(7), config=config)
 
 
 def _rules(env: Any, *names: str) -> dict[str, Any]:

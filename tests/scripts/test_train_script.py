@@ -383,6 +383,7 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("eval.days=[-1]", "eval.days=[-1]"),
         ("train.validation.every=0 train.validation.select_best=true", "select_best=true needs a validation"),
         ("train.validation.every=2 train.validation.select_best=maybe", "select_best='maybe'"),
+        ("train.validation.every=0 train.validation.at_start=true", "at_start=true needs a validation"),
     ],
 )
 def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
