@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from evcd.agents.base import EpisodeState
-from evcd.agents.heuristics import QueueAwareAgent
+from evcd.agents.heuristics import Observed, QueueAwareAgent
 from evcd.agents.in_turn import counted_at
 from evcd.utils.validation import check_real
 
@@ -101,18 +101,19 @@ class ReservationAgent(QueueAwareAgent):
         Raises:
             ValueError: ``obs`` is not ``(4m,)`` or ``(k, 4m)`` (the message names the shape).
         """
-        d, n, z, _ = self.read(obs)
-        return self.score(d, n, z + self.guided(obs), **self.known(obs))
+        p = self.physical(obs)
+        d, n, z, _ = self.read(p)
+        return self.score(d, n, z + self.guided(p), **self.known(p))
 
-    def guided(self, obs: np.ndarray) -> np.ndarray:
-        """The other guided EVs this rule counts ahead at each station: ``G`` where the observation
-        holds it, else ``H`` (whole vehicles)."""
+    def guided(self, obs: Observed) -> np.ndarray:
+        """The other guided EVs this rule counts ahead at each station (``obs`` or its
+        :meth:`physical` blocks): ``G`` where the observation holds it, else ``H`` (whole vehicles)."""
         p = self.physical(obs)
         return np.rint(p["G"] if "G" in p else p["H"])
 
-    def drive(self, obs: np.ndarray) -> np.ndarray:
-        """The drive time to each station (s): ``T`` where observed, else the queue-aware guess from
-        ``D`` and ``N``."""
+    def drive(self, obs: Observed) -> np.ndarray:
+        """The drive time to each station (s; ``obs`` or its :meth:`physical` blocks): ``T`` where
+        observed, else the queue-aware guess from ``D`` and ``N``."""
         p = self.physical(obs)
         return p["T"] if "T" in p else self.guess_drive(p["D"], p["N"])
 
@@ -171,20 +172,21 @@ class CentralAgent(ReservationAgent):
             ValueError: ``obs`` is not ``(k, 4m)`` with one row per episode.
         """
         batch = np.asarray(obs)
-        d, n, z, h = self.read(batch)
+        blocks = self.physical(batch)
+        d, n, z, h = self.read(blocks)
         assert h is not None  # obs_blocks = (4,)
         if batch.ndim != 2 or len(batch) != len(episodes):
             raise ValueError(
                 f"observations of shape {batch.shape} for {len(episodes)} episodes: one row each"
             )
         k, m = d.shape
-        ahead = z + self.guided(batch)  # (k, m): what each EV counts before this tick's assignments
+        ahead = z + self.guided(blocks)  # (k, m): what each EV counts before this tick's assignments
         counted = counted_at(d, episodes)
-        known = self.known(batch)  # the points in service and route times, where observed
+        known = self.known(blocks)  # the points in service and route times, where observed
         order = np.argsort(self.score(d, n, ahead, **known).min(axis=1), kind="stable")
         # the assignments so far: (station, when the EV is due there, +1 added / -1 removed); with H
         # every one counts for everybody after it (due at -inf), with G only for those due later
-        due = self.drive(batch) if "G" in (self.layout or "") else np.full((k, m), -np.inf)
+        due = self.drive(blocks) if "G" in (self.layout or "") else np.full((k, m), -np.inf)
         moves: list[tuple[int, float, float]] = []
         stations = np.empty(k, dtype=np.int64)
         for j in order:

@@ -26,6 +26,8 @@ from evcd.utils.validation import check_int, check_real
 #: The backlog the queue-aware estimate gives a station with no point in service (s): it is chosen
 #: only if every station is closed.
 CLOSED_S = 1.0e7
+#: An observation (one vector or a batch) or its blocks by letter in physical units (``physical``).
+Observed = np.ndarray | Mapping[str, np.ndarray]
 
 
 @dataclass
@@ -132,10 +134,10 @@ class QueueAwareAgent(Agent):
         """The env's charging points per station and whether it normalises observations."""
         return observation_units(env)
 
-    def read(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-        """``(D, N, Z, H)`` of ``obs`` (one observation or a batch) in metres and vehicles (float64):
-        ``Z`` in whole vehicles without the target (where ``D == 0``, it waits there and counts
-        itself), ``H`` in whole vehicles, ``None`` for a 3-block observation.
+    def read(self, obs: Observed) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(D, N, Z, H)`` of ``obs`` (one observation or a batch, or its :meth:`physical` blocks) in
+        metres and vehicles (float64): ``Z`` in whole vehicles without the target (where ``D == 0``, it
+        waits there and counts itself), ``H`` in whole vehicles, ``None`` for a 3-block observation.
 
         Raises:
             ValueError: ``obs`` has none of the shapes of :attr:`obs_blocks` (the message names them).
@@ -145,8 +147,11 @@ class QueueAwareAgent(Agent):
         z = np.rint(p["Z"]) - (d == 0.0)  # the target itself is counted in Z where it waits
         return d, p["N"], z, np.rint(p["H"]) if "H" in p else None
 
-    def physical(self, obs: np.ndarray) -> dict[str, np.ndarray]:
-        """Every block of ``obs`` by letter in metres, vehicles and seconds (float64)."""
+    def physical(self, obs: Observed) -> Mapping[str, np.ndarray]:
+        """Every block of ``obs`` by letter in metres, vehicles and seconds (float64); blocks already
+        read (a mapping) are returned as they are, so that one estimate converts an observation once."""
+        if isinstance(obs, Mapping):
+            return obs
         layout = self.layout or ("DNZH" if self.blocks_of(obs) == 4 else "DNZ")
         physical = to_physical(obs, self.points, self.normalized, layout)
         return dict(zip(layout, split_observation(physical, self.n_stations, layout), strict=True))
@@ -182,12 +187,13 @@ class QueueAwareAgent(Agent):
         """Estimated seconds to the start of charging at each station (of each row of a batch),
         reading the points in service (``P``) and the route's travel time (``T``) where the
         observation has them."""
-        d, n, z, _ = self.read(obs)
-        return self.score(d, n, z, **self.known(obs))
+        p = self.physical(obs)
+        d, n, z, _ = self.read(p)
+        return self.score(d, n, z, **self.known(p))
 
-    def known(self, obs: np.ndarray) -> dict[str, np.ndarray]:
-        """What the observation options tell the estimate: ``points`` (``P``) and ``drive`` (``T``),
-        where the observation has them."""
+    def known(self, obs: Observed) -> dict[str, np.ndarray]:
+        """What the observation options tell the estimate (``obs`` or its :meth:`physical` blocks):
+        ``points`` (``P``) and ``drive`` (``T``), where the observation has them."""
         p = self.physical(obs)
         out = {}
         if "P" in p:
@@ -228,9 +234,9 @@ class ForecastQueueAgent(QueueAwareAgent):
                 f"{self.name} reads the forecast block F: make the environment with observe=[..., forecast] "
                 f"(env.observe); this observation's layout is {self.layout or 'DNZ'}"
             )
-        d, n, z, _ = self.read(obs)
+        d, n, z, _ = self.read(p)
         ahead = np.where(d == 0.0, z, p["F"] + (np.rint(p["G"]) if "G" in p else 0.0))
-        return self.score(d, n, ahead, **self.known(obs))
+        return self.score(d, n, ahead, **self.known(p))
 
 
 class FixedStationAgent(Agent):

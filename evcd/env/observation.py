@@ -48,6 +48,7 @@ service) and ``T`` in minutes.
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -139,12 +140,21 @@ def unit_divisors(points: Sequence[int] | np.ndarray, layout: str | int = "DNZ")
     """What normalisation divides a vector of ``layout`` by (float64, one value per entry):
     :data:`D_SCALE_M` (m -> km), :data:`N_SCALE` (tens of vehicles), each station's charging points
     (``Z``, ``H``, ``P``: multiples of them) and :data:`T_SCALE_S` (s -> min). The one definition of the
-    scaled units: the environments' normalisation and the agents' reading of observations both use it."""
+    scaled units: the environments' normalisation and the agents' reading of observations both use it.
+    Read-only: computed once per points and layout (every observation a rule reads divides by it)."""
+    pts = np.asarray(points, dtype=np.float64)
+    return _unit_divisors(tuple(pts.ravel().tolist()), layout)
+
+
+@functools.lru_cache(maxsize=64)
+def _unit_divisors(points: tuple[float, ...], layout: str | int) -> np.ndarray:
     letters = check_layout(layout)
     pts = np.asarray(points, dtype=np.float64)
     m = pts.size
     per = {"D": np.full(m, D_SCALE_M), "N": np.full(m, N_SCALE), "T": np.full(m, T_SCALE_S)}
-    return np.concatenate([per.get(c, pts) for c in letters])
+    out = np.concatenate([per.get(c, pts) for c in letters])
+    out.flags.writeable = False
+    return out
 
 
 def block_vector(

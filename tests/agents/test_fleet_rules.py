@@ -103,6 +103,22 @@ def test_fleet_divisors_and_physical_units():
     np.testing.assert_array_equal(to_physical(raw[:, :9], points, False), raw[:, :9])
     with pytest.raises(ValueError, match="layout 5: must be 3 / 'DNZ' or 4 / 'DNZH'"):
         unit_divisors(points, 5)
+    # computed once per points and layout, and read-only (every caller divides by the same array)
+    divisors = unit_divisors(np.array(points), "DNZHP")
+    assert unit_divisors(points, "DNZHP") is divisors and not divisors.flags.writeable
+    assert unit_divisors([2, 3, 2], "DNZHP") is not divisors
+
+
+def test_a_rule_reads_physical_blocks_as_they_are():
+    """One estimate converts its observation once: the blocks it read pass through ``physical``."""
+    rng = np.random.default_rng(1)
+    points = [2, 3, 1]
+    agent = ReservationAgent(3, np.random.default_rng(0), points=points, normalized=True)
+    obs = normalized(random_fleet_obs(rng, 3, 5), points)
+    blocks = agent.physical(obs)
+    assert agent.physical(blocks) is blocks
+    np.testing.assert_array_equal(agent.read(blocks)[2], agent.read(obs)[2])
+    np.testing.assert_array_equal(agent.guided(blocks), agent.guided(obs))
 
 
 # ---------------------------------------------------------------------------------------- rules, fleet obs
