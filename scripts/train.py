@@ -30,7 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class, make_agent_for_env
 from evcd.cli.errors import stop_on_bad_setting
-from evcd.cli.params import agent_params, learner_config
+from evcd.cli.params import agent_params, check_learner_overrides, learner_config
 from evcd.cli.run_record import write_run_record
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
@@ -217,6 +217,7 @@ def train(cfg: DictConfig) -> float:
     """Run the training described by ``cfg`` in Hydra's run directory; return the evaluation mean
     travel time (what a sweeper minimises; with ``task=fleet`` the guided EVs')."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    check_learner_overrides(str(cfg.agent.name), HydraConfig.get().overrides.task)
     check_forecaster(cfg)
     fleet = check_task(cfg) == "fleet"
     parts = build_fleet(cfg) if fleet else build(cfg)

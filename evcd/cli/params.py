@@ -5,13 +5,14 @@ come from :mod:`evcd.experiments.worlds` (which a Python user outside the script
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class
 from evcd.agents.dqn_config import DQNConfig
-from evcd.loops.hindsight import check_dispatcher, dispatcher_learns
+from evcd.loops.hindsight import HindsightBound, check_dispatcher, dispatcher_learns
 
 
 def agent_params(cfg: DictConfig) -> tuple[str, dict[str, Any]]:
@@ -39,3 +40,25 @@ def learner_config(learner: DictConfig) -> DQNConfig:
     """
     values = OmegaConf.to_container(learner, resolve=True)
     return DQNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def check_learner_overrides(name: str, overrides: Sequence[str]) -> None:
+    """Refuse command-line ``learner`` settings (``learner.lr=...``, ``learner=paper``) for a learner
+    that does not read the ``learner`` block (e.g. ``ppo``, whose settings are ``agent.*``), so that
+    they are not silently ignored. A rule ignores them (a sweep may mix rules with learners).
+
+    Raises:
+        ValueError: naming the first such override and where the agent's settings are.
+    """
+    for override in overrides:
+        key = str(override).lstrip("+~").split("=", 1)[0]
+        if key != "learner" and not key.startswith("learner."):
+            continue
+        if name == HindsightBound.name:
+            return
+        learner = agent_class(name)  # an unknown name: ValueError listing the known ones
+        if not learner.learns or learner.learner_block:
+            return
+        raise ValueError(f"{override!r}: agent={name} does not read the DQN learners' `learner` block; "
+                         f"its settings are agent.* (e.g. agent.lr=...; python scripts/train.py "
+                         f"agent={name} --cfg job lists them)")  # fmt: skip

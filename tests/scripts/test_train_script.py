@@ -384,6 +384,7 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("train.validation.every=0 train.validation.select_best=true", "select_best=true needs a validation"),
         ("train.validation.every=2 train.validation.select_best=maybe", "select_best='maybe'"),
         ("train.validation.every=0 train.validation.at_start=true", "at_start=true needs a validation"),
+        ("agent=ppo learner.lr=0.01", "agent=ppo does not read the DQN learners' `learner` block"),
     ],
 )
 def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
