@@ -63,6 +63,11 @@ class DQNConfig:
         rule_prior: the Q-value is that estimate turned into the discounted return of the ``"time"``
             reward plus the network's output, which starts at zero (:mod:`evcd.agents.rule_prior`):
             the untrained learner decides as the rule; needs the stations' points.
+        rule_prior_bound_s: with ``rule_prior``, the network corrects the rule's estimate in seconds
+            instead of adding to the Q-value: ``Q = prior(E + b tanh(c))`` with ``b`` this bound, so a
+            station's estimate moves at most ``b`` seconds either way (the learner can reorder the
+            stations the rule puts within ``2 b`` of each other, never send an EV to a queue the rule
+            puts far longer). ``None``: the additive correction.
     """
 
     hidden: tuple[int, ...] = (512, 256)
@@ -93,6 +98,7 @@ class DQNConfig:
     in_turn: bool = False
     rule_estimate: bool = False
     rule_prior: bool = False
+    rule_prior_bound_s: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", check_hidden(self.hidden))
@@ -114,6 +120,11 @@ class DQNConfig:
         check_bool("in_turn", self.in_turn)
         check_bool("rule_estimate", self.rule_estimate)
         check_bool("rule_prior", self.rule_prior)
+        if self.rule_prior_bound_s is not None:
+            check_real("rule_prior_bound_s", self.rule_prior_bound_s, low=0.0, low_open=True)
+            if not self.rule_prior:
+                raise ValueError(f"rule_prior_bound_s={self.rule_prior_bound_s!r} bounds the correction of "
+                                 "rule_prior: set rule_prior=true, or leave it null")  # fmt: skip
         if self.lr_end is not None:
             check_real("lr_end", self.lr_end, low=0.0, low_open=True)
         if self.max_grad_norm is not None:

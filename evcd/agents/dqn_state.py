@@ -26,6 +26,7 @@ _SETTINGS: dict[str, tuple[Callable[[Any], Any], tuple[Any, ...]]] = {
     "in_turn": (bool, (False,)),
     "rule_estimate": (bool, (False,)),
     "rule_prior": (bool, (False,)),
+    "rule_prior_bound_s": (lambda v: None if v is None else float(v), (None,)),
 }
 #: the settings a checkpoint's networks must share with the agent that loads them (all but how it
 #: decides a fleet tick)
@@ -72,8 +73,8 @@ def check_policy_state(
 
 def policy_settings(agent: Any) -> dict[str, Any]:
     """The network settings (``hidden``, ``network``, ``double``, ``dueling``, ``rule_estimate``,
-    ``rule_prior``) of a saved DQN policy and how it decides a fleet tick (``in_turn``), so that a
-    policy can be rebuilt to load it and act as it was trained.
+    ``rule_prior``, ``rule_prior_bound_s``) of a saved DQN policy and how it decides a fleet tick
+    (``in_turn``), so that a policy can be rebuilt to load it and act as it was trained.
 
     Raises:
         CheckpointError: ``agent`` is not a DQN agent's state.

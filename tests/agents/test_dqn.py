@@ -1096,6 +1096,7 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
         "in_turn": False,
         "rule_estimate": False,
         "rule_prior": False,
+        "rule_prior_bound_s": None,
     }
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")

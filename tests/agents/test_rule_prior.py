@@ -152,3 +152,63 @@ def test_a_checkpoint_keeps_the_setting_and_the_prior_it_was_trained_with(tmp_pa
     with pytest.raises(CheckpointError, match="rule_prior=False; this one has rule_prior=True"):
         _agent("dqn").load_state_dict(old, policy_only=True)
     _agent("dqn", seed=3, rule_prior=False).load_state_dict(old, policy_only=True)
+
+
+# ---------------------------------------------------------------------------------------- the bound
+def _estimate_input(seconds: list[float]) -> torch.Tensor:
+    """A network input (3 zero inputs) whose estimate block is ``seconds``."""
+    return torch.cat([torch.zeros(1, M), torch.tensor([seconds]) / 1000.0], dim=1)
+
+
+def test_a_bounded_correction_moves_the_estimate_by_at_most_its_seconds() -> None:
+    # the network's output c moves each station's estimate by bound x tanh(c) seconds: by hand
+    head = torch.nn.Sequential(torch.nn.Linear(M, M))  # its output layer is zeroed: Q is the prior
+    q = RulePriorQ(head, M, False, 60.0, 0.9, 10.0, bound_s=120.0)
+    x = _estimate_input([100.0, 600.0, 3000.0])
+    expected = time_return(torch.tensor([[100.0, 600.0, 3000.0]]), 60.0, 0.9, 10.0)
+    np.testing.assert_allclose(q(x).detach().numpy(), expected.numpy(), rtol=1e-6)
+    with torch.no_grad():
+        head[0].bias.copy_(torch.tensor([-10.0, 0.5, 10.0]))  # tanh: -1, 0.462, +1
+    moved = torch.tensor([[0.0, 600.0 + 120.0 * np.tanh(0.5), 3120.0]])  # 100 - 120 clamps at 0
+    np.testing.assert_allclose(q(x).detach().numpy(), time_return(moved, 60.0, 0.9, 10.0).numpy(), rtol=1e-5)
+    # whatever the network outputs, a station the rule puts more than 2 x 120 s later stays behind
+    with torch.no_grad():
+        head[0].bias.copy_(torch.tensor([1e3, -1e3, -1e3]))
+    assert int(q(_estimate_input([100.0, 341.0, 5000.0])).argmax()) == 0
+
+
+def test_a_bounded_learner_starts_as_the_rule_and_learns_within_its_bound() -> None:
+    kwargs = {"blocks": "DNZH", "network": "station"}
+    agent = _agent("dqn", learning_starts=8, lr=1e-2, rule_prior_bound_s=300.0, **kwargs)
+    plain = _agent("dqn", **kwargs)
+    obs = _fleet_obs(50)[:, : 4 * M]
+    np.testing.assert_allclose(agent.q_values(obs), plain.q_values(obs), rtol=1e-6)  # untrained: the prior
+    # station 2 (two cars for its two points: the rule's 675 s) always ends in charging at once with
+    # -0.5 (x10 scale; the return of ~3.4 slots): its estimate falls by the bound, 300 s, and no further
+    one = np.array([1200.0, 600.0, 900.0, 0, 0, 0, 1, 0, 2, 0, 0, 0], dtype=np.float32)
+    estimate = float(RuleEstimate(M, "DNZH", 2, False)(one)[2]) * 1000.0
+    assert estimate == pytest.approx(675.0)
+    for _ in range(300):
+        agent.observe(Transition(one, 2, -0.05, one, True, False))
+    floor = float(time_return(torch.tensor(estimate - 300.0), 60.0, 0.9, 10.0))
+    q2 = float(agent.q_values(one)[2])
+    assert floor - 1e-4 <= q2 < floor + 0.02 and q2 < -0.5 - 0.25
+    assert q2 > float(plain.q_values(one)[2]) + 0.2
+
+
+def test_the_bound_is_checked_and_kept_by_checkpoints(tmp_path) -> None:
+    with pytest.raises(ValueError, match=r"rule_prior_bound_s=300\.0 bounds the correction of rule_prior"):
+        _agent(rule_prior=False, rule_prior_bound_s=300.0)
+    with pytest.raises(ValueError, match="rule_prior_bound_s"):
+        _agent(rule_prior_bound_s=-1.0)
+    agent = _agent("dueling_ddqn", network="station", rule_prior_bound_s=300.0)
+    save_checkpoint(tmp_path, agent.state_dict(), "agent")
+    assert saved_options(tmp_path)["rule_prior_bound_s"] == 300.0
+    with pytest.raises(CheckpointError, match=r"bound_s=300\.0; this one has rule_prior_bound_s=None"):
+        _agent("dueling_ddqn", network="station").load_state_dict(agent.state_dict(), policy_only=True)
+    # a checkpoint from before the setting existed has the additive correction
+    old = _agent("dqn").state_dict()
+    del old["config"]["rule_prior_bound_s"]
+    _agent("dqn", seed=3).load_state_dict(old, policy_only=True)
+    with pytest.raises(CheckpointError, match=r"bound_s=None; this one has rule_prior_bound_s=120\.0"):
+        _agent("dqn", rule_prior_bound_s=120.0).load_state_dict(old, policy_only=True)
