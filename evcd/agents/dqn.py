@@ -189,6 +189,7 @@ class DQNAgent(Agent):
         c = self.config
         switches = ("in_turn", "rule_estimate", "rule_prior")
         turn = "".join(f", {n.replace('_', ' ')}" for n in switches if getattr(c, n))
+        turn += f" within {c.rule_prior_bound_s:g} s" if c.rule_prior_bound_s is not None else ""
         return (f"DQNAgent({self.name}, {c.network} {list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
                 f"buffer={c.buffer_size}, alpha={c.alpha:g}, "
                 f"target_update={c.target_update}{turn})")  # fmt: skip
