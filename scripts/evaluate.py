@@ -29,10 +29,11 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class, agent_defaults, make_agent_for_env
-from evcd.agents.saved_policy import saved_policy
+from evcd.agents.saved_policy import saved_run
 from evcd.cli.errors import stop_on_bad_setting
 from evcd.cli.params import agent_params
 from evcd.cli.run_record import write_run_record
+from evcd.cli.trained_world import run_config, trained_world, warnings
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import check_engine, make_runner
@@ -54,10 +55,11 @@ log = logging.getLogger("evaluate")
 
 def trained_policy(
     name: str, params: dict[str, Any], learns: bool
-) -> tuple[dict[str, Any], Mapping[str, Any] | None]:
+) -> tuple[dict[str, Any], Mapping[str, Any] | None, Mapping[str, Any] | None]:
     """The agent's arguments and, for a learner, its trained policy (``agent.checkpoint``), whose
     network settings replace the agent block's (:meth:`~evcd.agents.Agent.checkpoint_options`: the
-    policy is rebuilt as it was trained); load the policy into the agent once it is made.
+    policy is rebuilt as it was trained), and the config of the run that trained it (where the
+    checkpoint holds one); load the policy into the agent once it is made.
 
     Raises:
         ValueError: a learner without ``agent.checkpoint``.
@@ -66,12 +68,13 @@ def trained_policy(
     """
     path = params.pop("checkpoint", None)
     if not learns:
-        return params, None
+        return params, None, None
     if path is None:
         raise ValueError(f"agent {name!r} learns: give the trained policy with agent.checkpoint=PATH "
                          "(a run directory of scripts/train.py or a checkpoint file)")  # fmt: skip
     path = to_absolute_path(str(path))
-    policy = saved_policy(path)
+    policy, trained_config = saved_run(path)
+    trained_config = run_config(path, trained_config)  # a run's best/: its run's
     try:
         options = agent_class(name).checkpoint_options(policy)
     except CheckpointError as exc:
@@ -83,7 +86,7 @@ def trained_policy(
                               f"{ {k: implied[k] for k in clash} }: evaluate it under the name it was "
                               "trained as")  # fmt: skip
     log.info("%s: the trained policy of %s", name, path)
-    return {**params, **options}, policy
+    return {**params, **options}, policy, trained_config
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
@@ -94,7 +97,9 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     seed = check_int("seed", cfg.seed, minimum=0)
     resamples = check_int("bootstrap_resamples", cfg.bootstrap_resamples, minimum=1)
     task = TASKS["fleet" if cfg.task == "fleet" else "single"]
-    name, agent, runner = _fleet_dispatcher(cfg, seed) if task.name == "fleet" else _dispatcher(cfg, seed)
+    dispatcher = _fleet_dispatcher if task.name == "fleet" else _dispatcher
+    name, agent, runner, trained_config = dispatcher(cfg, seed)
+    world = trained_world(trained_config, OmegaConf.to_container(cfg, resolve=True))
     files = [out_dir / task.eval_csv, out_dir / RESULTS_JSON]
     if task.name == "fleet":
         files.append(out_dir / FLEET_PNG)
@@ -104,11 +109,15 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     write_run_record(out_dir, cfg)  # every check passed
     log.info("%s%s on %s, evs=%s, %d episodes, seed %d", "fleet: " if task.name == "fleet" else "", agent,
              runner.env.scenario.root, cfg.evs, episodes, seed)  # fmt: skip
+    for line in warnings(world):
+        log.warning(line)
     try:
         runner.prepare()  # build the day snapshots now, so that no episode's wall time includes them
         result = evaluate(runner, agent, episodes, seed, progress=bool(cfg.progress), resamples=resamples)
     finally:
         runner.close()
+    if world is not None:
+        result = dataclasses.replace(result, extra={**result.extra, "trained_world": world})
     write_episodes_csv(result, files[0])
     write_results_json(result, files[1], config=OmegaConf.to_container(cfg, resolve=True))
     task.figures(out_dir, result, {}, runner)
@@ -133,30 +142,31 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     return {**dataclasses.asdict(s), "mean_travel_time": task.score(s)}
 
 
-def _dispatcher(cfg: DictConfig, seed: int) -> tuple[str, Any, Any]:
-    """The single target's dispatcher (with its trained policy) and runner; no SUMO yet."""
+def _dispatcher(cfg: DictConfig, seed: int) -> tuple[str, Any, Any, Mapping[str, Any] | None]:
+    """The single target's dispatcher (with its trained policy), runner and the trained policy's run
+    config; no SUMO yet."""
     name, params = agent_params(cfg)  # unknown agent -> ValueError listing the known ones
-    params, policy = trained_policy(name, params, dispatcher_learns(name))
+    params, policy, trained_config = trained_policy(name, params, dispatcher_learns(name))
     engine, batch = check_engine(cfg.engine, cfg.batch_episodes)
     env = ChargingNavEnv(**env_kwargs(cfg))  # validates every env value; loads the scenario, no SUMO
     agent = make_dispatcher(name, env, agent_rng(seed), **params)
     if policy is not None:
         agent.load_state_dict(policy, policy_only=True)
-    return name, agent, make_runner(env, engine, batch)
+    return name, agent, make_runner(env, engine, batch), trained_config
 
 
-def _fleet_dispatcher(cfg: DictConfig, seed: int) -> tuple[str, Any, FleetRunner]:
-    """``task=fleet``: one dispatcher for every guided EV (with its trained policy) and the fleet's
-    runner; no SUMO yet."""
+def _fleet_dispatcher(cfg: DictConfig, seed: int) -> tuple[str, Any, FleetRunner, Mapping[str, Any] | None]:
+    """``task=fleet``: one dispatcher for every guided EV (with its trained policy), the fleet's
+    runner and the trained policy's run config; no SUMO yet."""
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = str(params.pop("name"))
-    params, policy = trained_policy(name, params, fleet_dispatcher_learns(name))
+    params, policy, trained_config = trained_policy(name, params, fleet_dispatcher_learns(name))
     env = FleetEnv(**fleet_kwargs(cfg))  # validates every value; loads the scenario, no SUMO
     env.check_days()  # every day has EVs to guide (its routes, no SUMO)
     agent = make_agent_for_env(name, env, agent_rng(seed), **params)
     if policy is not None:
         agent.load_state_dict(policy, policy_only=True)
-    return name, agent, FleetRunner(env)
+    return name, agent, FleetRunner(env), trained_config
 
 
 def _brief(row: Any) -> dict[str, Any]:

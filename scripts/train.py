@@ -94,7 +94,9 @@ def _settings(cfg: DictConfig, seed: int, min_episodes: int) -> dict[str, Any]:
         "log_window": check_int("train.log_window", cfg.train.log_window, minimum=1),
         "resamples": check_int("eval.bootstrap_resamples", cfg.eval.bootstrap_resamples, minimum=1),
         "validation": ValidationSettings(
-            cfg.train.validation.every, cfg.train.validation.episodes, cfg.train.validation.select_best,
+            cfg.train.validation.every,
+            cfg.train.validation.episodes,
+            cfg.train.validation.select_best,
             cfg.train.validation.at_start,
         ),
     }

@@ -25,8 +25,19 @@ def saved_policy(path: str | Path) -> Mapping[str, Any]:
     Raises:
         CheckpointError: nothing readable there, or no agent state in it.
     """
+    return saved_run(path)[0]
+
+
+def saved_run(path: str | Path) -> tuple[Mapping[str, Any], Mapping[str, Any] | None]:
+    """:func:`saved_policy` and the config of the run that saved it (``None`` where the file holds
+    none: a ``best/`` folder, an agent state alone).
+
+    Raises:
+        CheckpointError: nothing readable there, or no agent state in it.
+    """
     payload = load_checkpoint(path)
     agent = payload.get("agent", payload) if isinstance(payload, Mapping) else None
     if not isinstance(agent, Mapping):
         raise CheckpointError(f"checkpoint {str(path)!r} holds no agent state")
-    return agent
+    config = payload.get("config") if agent is not payload else None
+    return agent, config if isinstance(config, Mapping) else None

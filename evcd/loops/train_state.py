@@ -186,11 +186,13 @@ def check_run_dir(run_dir: Path, resume: bool) -> None:
         )
 
 
-def config_diff(saved: Mapping[str, Any], current: Mapping[str, Any], prefix: str = "") -> list[str]:
+def config_diff(
+    saved: Mapping[str, Any], current: Mapping[str, Any], prefix: str = "", what: str = "resume"
+) -> list[str]:
     """``"key: saved -> current"`` for every setting that differs (nested keys dotted), but those of
     :data:`RESUME_FREE_KEYS` and a setting the saved run did not have that is off now (``false``,
     ``null`` or ``[]``): an option added to evcd since the checkpoint, at the value that keeps what
-    the run did (evcd's options are off by default)."""
+    the run did (evcd's options are off by default; logged, beginning with ``what``)."""
     keys = sorted(set(saved) | set(current))
     out = []
     for key in keys:
@@ -199,10 +201,10 @@ def config_diff(saved: Mapping[str, Any], current: Mapping[str, Any], prefix: st
             continue
         a, b = saved.get(key, "<missing>"), current.get(key, "<missing>")
         if key not in saved and _is_off(b):
-            log.info("resume: %s=%r is new since the checkpoint's run; off, as that run was", name, b)
+            log.info("%s: %s=%r is new since the checkpoint's run; off, as that run was", what, name, b)
             continue
         if isinstance(a, Mapping) and isinstance(b, Mapping):
-            out += config_diff(a, b, f"{name}.")
+            out += config_diff(a, b, f"{name}.", what)
         elif a != b:
             out.append(f"{name}: {a!r} -> {b!r}")
     return out

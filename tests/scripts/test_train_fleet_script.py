@@ -111,12 +111,15 @@ def test_train_a_fleet_then_evaluate_its_policy(small, script_overrides, tmp_pat
         "env.demand_seeds=[1]",
         "episodes=1",
         "agent=dqn",
-        f"agent.checkpoint={run}",
+        f"agent.checkpoint={run / 'best'}",  # the selected policy: the networks alone
         f"hydra.run.dir={out}",
     )
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     again = json.loads((out / "results.json").read_text())
     assert again["summary"]["guided_travel"] == pytest.approx(data["summary"]["guided_travel"])
+    # its own world (read from the run's checkpoint) and held-out day: nothing to warn about
+    assert again["trained_world"] == {"differences": [], "training_days": [], "tuning_days": [],
+                                      "forecast_days": None}  # fmt: skip
     # a finished run is not resumed, nor overwritten
     proc = run_script("train.py", *small, "agent=dqn", "resume=true", f"hydra.run.dir={run}")
     assert proc.returncode == 2 and "that run is complete" in proc.stdout + proc.stderr

@@ -276,6 +276,20 @@ def test_a_tiny_training_run_end_to_end(small, tmp_path):
         )  # fmt: skip  (peak's reward)
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert read_csv(ev / "episodes.csv") == read_csv(out / "episodes.csv")
+        # the training's world, on days it never saw: nothing to say (evcd.cli.trained_world)
+        world = json.loads((ev / "results.json").read_text())["trained_world"]
+        assert world == {"differences": [], "training_days": [], "tuning_days": [], "forecast_days": None}
+    # another departure window, on a training day: played, and both named in the log and results.json
+    ev = tmp_path / "eval_elsewhere"
+    proc = run_script("evaluate.py", *plain, "agent=dqn", f"agent.checkpoint={out}", "episodes=1",
+                      "env.demand_seeds=[0]", "env.reward=time", "env.departure_window=[21600,22500]",
+                      f"hydra.run.dir={ev}")  # fmt: skip
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-3000:]
+    assert "env.departure_window: [21600, 23400] -> [21600, 22500]" in log, log[-3000:]
+    assert "evaluated on days the policy trained on: [0]" in log
+    world = json.loads((ev / "results.json").read_text())["trained_world"]
+    assert world["training_days"] == [0] and len(world["differences"]) == 1
     # the policy under a name that means other switches, or another learner's: refused, naming why
     for name, needle in (("dueling_ddqn", "evaluate it under the name it was trained as"),
                          ("ppo", "does not hold a PPO agent")):  # fmt: skip
