@@ -99,7 +99,8 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     task = TASKS["fleet" if cfg.task == "fleet" else "single"]
     dispatcher = _fleet_dispatcher if task.name == "fleet" else _dispatcher
     name, agent, runner, trained_config = dispatcher(cfg, seed)
-    world = trained_world(trained_config, OmegaConf.to_container(cfg, resolve=True))
+    config = OmegaConf.to_container(cfg, resolve=True)
+    world = trained_world(trained_config, config)
     files = [out_dir / task.eval_csv, out_dir / RESULTS_JSON]
     if task.name == "fleet":
         files.append(out_dir / FLEET_PNG)
@@ -119,7 +120,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     if world is not None:
         result = dataclasses.replace(result, extra={**result.extra, "trained_world": world})
     write_episodes_csv(result, files[0])
-    write_results_json(result, files[1], config=OmegaConf.to_container(cfg, resolve=True))
+    write_results_json(result, files[1], config=config)
     task.figures(out_dir, result, {}, runner)
     s = result.summary
     if task.name == "fleet":

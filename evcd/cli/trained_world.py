@@ -52,12 +52,13 @@ def trained_world(saved: Mapping[str, Any] | None, current: Mapping[str, Any]) -
     before["env"] = {k: v for k, v in trained_env.items() if k not in ENV_FREE}
     now["env"] = {k: v for k, v in env.items() if k not in ENV_FREE}
     days = _mapping(saved.get("days"))
+    trained_on = _ints(days.get("train", trained_env.get("demand_seeds")))
     evaluated = set(_ints(env.get("demand_seeds")))
     return {
         "differences": config_diff(before, now, what="the trained policy"),
-        "training_days": sorted(evaluated & set(_ints(days.get("train", trained_env.get("demand_seeds"))))),
+        "training_days": sorted(evaluated & set(trained_on)),
         "tuning_days": sorted(evaluated & set(_ints(days.get("tuning")))),
-        "forecast_days": _forecast_days(trained_env, env, days),
+        "forecast_days": _forecast_days(trained_env, env, trained_on),
     }
 
 
@@ -89,14 +90,14 @@ def warnings(report: Mapping[str, Any] | None) -> list[str]:
 
 
 def _forecast_days(
-    trained_env: Mapping[str, Any], env: Mapping[str, Any], days: Mapping[str, Any]
+    trained_env: Mapping[str, Any], env: Mapping[str, Any], trained_on: list[int]
 ) -> str | None:
     """The forecast's learning days, trained -> now, where the policy observes a forecast and they
-    differ (a run with ``forecast_days: null`` learnt from its training days)."""
+    differ (a run with ``forecast_days: null`` learnt from its training days, ``trained_on``)."""
     if "forecast" not in (trained_env.get("observe") or ()):
         return None
     before = trained_env.get("forecast_days")
-    before = _ints(before if before is not None else days.get("train", trained_env.get("demand_seeds")))
+    before = _ints(before) if before is not None else trained_on
     now = _ints(env.get("forecast_days"))
     return None if sorted(before) == sorted(now) else f"{sorted(before)} -> {sorted(now)}"
 
