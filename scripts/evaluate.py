@@ -58,8 +58,10 @@ def trained_policy(
 ) -> tuple[dict[str, Any], Mapping[str, Any] | None, Mapping[str, Any] | None]:
     """The agent's arguments and, for a learner, its trained policy (``agent.checkpoint``), whose
     network settings replace the agent block's (:meth:`~evcd.agents.Agent.checkpoint_options`: the
-    policy is rebuilt as it was trained), and the config of the run that trained it (where the
-    checkpoint holds one); load the policy into the agent once it is made.
+    policy is rebuilt as it was trained) but for its decision options given in the agent block
+    (:attr:`~evcd.agents.Agent.decision_options`, e.g. ``+agent.switch_margin_s=120``), and the
+    config of the run that trained it (where the checkpoint holds one); load the policy into the
+    agent once it is made.
 
     Raises:
         ValueError: a learner without ``agent.checkpoint``.
@@ -86,7 +88,8 @@ def trained_policy(
                               f"{ {k: implied[k] for k in clash} }: evaluate it under the name it was "
                               "trained as")  # fmt: skip
     log.info("%s: the trained policy of %s", name, path)
-    return {**params, **options}, policy, trained_config
+    given = {key: params[key] for key in agent_class(name).decision_options if key in params}
+    return {**params, **options, **given}, policy, trained_config
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:

@@ -59,10 +59,14 @@ from evcd.agents.networks import make_q_network
 from evcd.agents.replay import PrioritizedReplayBuffer
 from evcd.agents.rule_input import RuleEstimate
 from evcd.agents.rule_prior import prior_network
+from evcd.agents.switching import greedy_stations, learner_keep
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
 from evcd.utils.validation import check_bool, with_overrides
 
 log = logging.getLogger(__name__)
+#: the agent's counters a checkpoint keeps, and their types
+_COUNTERS = {"steps": int, "gradient_steps": int, "target_updates": int, "loss_total": float,
+             "q_total": float}  # fmt: skip
 
 
 class DQNAgent(Agent):
@@ -91,6 +95,7 @@ class DQNAgent(Agent):
     options: ClassVar[Mapping[str, Any]] = {"double": False, "dueling": False, "checkpoint": None}
     env_options = ("points", "normalized", "obs_blocks", "decision_interval", "reward")
     learner_block = True
+    decision_options = ("switch_margin_s",)
 
     def __init__(
         self,
@@ -138,6 +143,8 @@ class DQNAgent(Agent):
             self.online = make_q_network(net_dim, self.n_stations, cfg.hidden, self.dueling, cfg.network)
         if cfg.rule_prior:  # the network becomes the correction to the rule's return
             self.online = prior_network(self.online, m, cfg, decision_interval, reward)
+        #: keep(q, current) -> the greedy station within switch_margin_s (None: no margin, the argmax)
+        self._keep = learner_keep(cfg.switch_margin_s, decision_interval, reward, cfg.gamma, cfg.reward_scale)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self.optimizer = torch.optim.Adam(self.online.parameters(), lr=cfg.lr)
         self.replay = PrioritizedReplayBuffer(cfg.buffer_size, self.obs_dim, cfg.alpha, cfg.priority_eps)
@@ -190,6 +197,8 @@ class DQNAgent(Agent):
         switches = ("in_turn", "rule_estimate", "rule_prior")
         turn = "".join(f", {n.replace('_', ' ')}" for n in switches if getattr(c, n))
         turn += f" within {c.rule_prior_bound_s:g} s" if c.rule_prior_bound_s is not None else ""
+        turn += " relative" if c.rule_prior_relative else ""
+        turn += f", switch margin {c.switch_margin_s:g} s" if c.switch_margin_s > 0 else ""
         return (f"DQNAgent({self.name}, {c.network} {list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
                 f"buffer={c.buffer_size}, alpha={c.alpha:g}, "
                 f"target_update={c.target_update}{turn})")  # fmt: skip
@@ -232,18 +241,22 @@ class DQNAgent(Agent):
     def decide(self, obs: np.ndarray, episodes: Sequence[DQNEpisode], explore: bool = False) -> np.ndarray:
         """``argmax Q`` of each observation (one forward pass), epsilon-greedy per episode if ``explore``;
         with ``in_turn``, the rows one after the other (:func:`~evcd.agents.in_turn.learner_tick`)."""
+        keep = self._keep  # with switch_margin_s: an EV keeps its station within the margin
         if self.config.in_turn:  # the fleet's EVs of one tick one after the other
             choose = lambda j, greedy: self._choose(greedy, episodes[j], explore)  # noqa: E731
-            return learner_tick(obs, episodes, self._vehicle, self.q_values, choose, self._push, self.layout)
-        greedy = self.q_values(obs).argmax(axis=-1)
+            return learner_tick(obs, episodes, self._vehicle, self.q_values, choose, self._push, self.layout,
+                                keep)  # fmt: skip
+        greedy = greedy_stations(self.q_values(obs), np.asarray(obs)[:, : self.n_stations], episodes, keep)
         pairs = zip(greedy, episodes, strict=True)
         return np.array([self._choose(int(g), episode, explore) for g, episode in pairs], dtype=np.int64)
 
     def _choose(self, greedy: int, episode: DQNEpisode, explore: bool) -> int:
-        """The action given the greedy one: the exploration draws, from the episode's generator."""
-        if not explore:
-            return greedy
-        return episode.choose(greedy, self.epsilon, self.n_stations, self.config.exploration)
+        """The action given the greedy one (the exploration draws, from the episode's generator), kept as
+        the episode's station (where ``switch_margin_s`` and ``in_turn`` count it)."""
+        if explore:
+            greedy = episode.choose(greedy, self.epsilon, self.n_stations, self.config.exploration)
+        episode.station = int(greedy)
+        return episode.station
 
     # ------------------------------------------------------------------ learning
     def observe(self, transition: Transition, episode: DQNEpisode | None = None) -> None:
@@ -319,10 +332,7 @@ class DQNAgent(Agent):
         discounts = torch.from_numpy(batch.discounts.astype(np.float32))
         target = self.td_targets(rewards, next_obs, terminated, discounts)
         q = self.online(obs).gather(1, actions[:, None]).squeeze(1)
-        if c.loss == "mse":
-            per_sample = F.mse_loss(q, target, reduction="none")
-        else:
-            per_sample = F.smooth_l1_loss(q, target, reduction="none")
+        per_sample = (F.mse_loss if c.loss == "mse" else F.smooth_l1_loss)(q, target, reduction="none")
         loss = (weights * per_sample).mean()
         self.optimizer.zero_grad(set_to_none=True)
         for group in self.optimizer.param_groups:
@@ -376,13 +386,7 @@ class DQNAgent(Agent):
             **self.policy_state_dict(),
             "optimizer": copy.deepcopy(self.optimizer.state_dict()),
             "replay": self.replay.state_dict(),
-            "counters": {
-                "steps": self.steps,
-                "gradient_steps": self.gradient_steps,
-                "target_updates": self.target_updates,
-                "loss_total": self.loss_total,
-                "q_total": self.q_total,
-            },
+            "counters": {key: getattr(self, key) for key in _COUNTERS},
             "rng": self.rng.bit_generator.state,
             "learn_rng": self.learn_rng.bit_generator.state,
         }
@@ -433,12 +437,8 @@ class DQNAgent(Agent):
             self.replay.load_state_dict(to_numpy(state["replay"]))
         except (RuntimeError, KeyError, ValueError) as exc:
             raise CheckpointError(f"the checkpoint does not fit this agent: {exc}") from exc
-        counters = state["counters"]
-        self.steps = int(counters["steps"])
-        self.gradient_steps = int(counters["gradient_steps"])
-        self.target_updates = int(counters["target_updates"])
-        self.loss_total = float(counters["loss_total"])
-        self.q_total = float(counters["q_total"])
+        for key, kind in _COUNTERS.items():
+            setattr(self, key, kind(state["counters"][key]))
         self.rng.bit_generator.state = state["rng"]
         self.learn_rng.bit_generator.state = state["learn_rng"]
 

@@ -68,6 +68,15 @@ class DQNConfig:
             station's estimate moves at most ``b`` seconds either way (the learner can reorder the
             stations the rule puts within ``2 b`` of each other, never send an EV to a queue the rule
             puts far longer). ``None``: the additive correction.
+        rule_prior_relative: with ``rule_prior_bound_s``, each station's estimate moves by its
+            correction less the stations' mean, without the floor at 0 s: a correction of every
+            station alike (what a biased estimate teaches) is none (:mod:`evcd.agents.rule_prior`).
+        switch_margin_s: an EV already sent to a station (or waiting in its car park) keeps it unless
+            another station's Q-value, read as seconds to the start of charging under the ``"time"``
+            reward (:func:`evcd.agents.switching.return_seconds`), is more than this many seconds
+            sooner; 0 (default): the greedy station. The fleet rules' margin
+            (:mod:`evcd.agents.switching`); a checkpoint keeps it as how its policy decides, and a
+            policy loads with another margin (``+agent.switch_margin_s``). Needs the ``"time"`` reward.
     """
 
     hidden: tuple[int, ...] = (512, 256)
@@ -99,6 +108,8 @@ class DQNConfig:
     rule_estimate: bool = False
     rule_prior: bool = False
     rule_prior_bound_s: float | None = None
+    rule_prior_relative: bool = False
+    switch_margin_s: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", check_hidden(self.hidden))
@@ -125,6 +136,11 @@ class DQNConfig:
             if not self.rule_prior:
                 raise ValueError(f"rule_prior_bound_s={self.rule_prior_bound_s!r} bounds the correction of "
                                  "rule_prior: set rule_prior=true, or leave it null")  # fmt: skip
+        check_bool("rule_prior_relative", self.rule_prior_relative)
+        if self.rule_prior_relative and self.rule_prior_bound_s is None:
+            raise ValueError("rule_prior_relative=true centres the bounded correction of rule_prior: set "
+                             "rule_prior_bound_s (seconds), or leave it false")  # fmt: skip
+        check_real("switch_margin_s", self.switch_margin_s, low=0.0)
         if self.lr_end is not None:
             check_real("lr_end", self.lr_end, low=0.0, low_open=True)
         if self.max_grad_norm is not None:

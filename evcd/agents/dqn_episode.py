@@ -27,8 +27,9 @@ class DQNEpisode(EpisodeState):
     random_station: int | None = None
     #: n-step returns: this episode's transitions not stored yet (the last n - 1 at most)
     pending: deque[Transition] = field(default_factory=deque)
-    #: ``in_turn`` (the fleet): the station it was sent to at its last decision, the observation it
-    #: decided on, and its last transition, stored once the observation of its next decision is known
+    #: the station it was sent to at its last decision (``switch_margin_s`` keeps it; ``in_turn`` counts
+    #: it), and with ``in_turn`` (the fleet) the observation it decided on and its last transition,
+    #: stored once the observation of its next decision is known
     station: int | None = None
     seen: np.ndarray | None = None
     held: Transition | None = None

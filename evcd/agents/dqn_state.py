@@ -27,10 +27,12 @@ _SETTINGS: dict[str, tuple[Callable[[Any], Any], tuple[Any, ...]]] = {
     "rule_estimate": (bool, (False,)),
     "rule_prior": (bool, (False,)),
     "rule_prior_bound_s": (lambda v: None if v is None else float(v), (None,)),
+    "rule_prior_relative": (bool, (False,)),
+    "switch_margin_s": (float, (0.0,)),
 }
 #: the settings a checkpoint's networks must share with the agent that loads them (all but how it
-#: decides a fleet tick)
-CHECKED_SETTINGS = tuple(key for key in _SETTINGS if key != "in_turn")
+#: decides: a fleet tick in turn or side by side, the switching margin)
+CHECKED_SETTINGS = tuple(key for key in _SETTINGS if key not in ("in_turn", "switch_margin_s"))
 
 
 def check_policy_state(
@@ -73,8 +75,9 @@ def check_policy_state(
 
 def policy_settings(agent: Any) -> dict[str, Any]:
     """The network settings (``hidden``, ``network``, ``double``, ``dueling``, ``rule_estimate``,
-    ``rule_prior``, ``rule_prior_bound_s``) of a saved DQN policy and how it decides a fleet tick
-    (``in_turn``), so that a policy can be rebuilt to load it and act as it was trained.
+    ``rule_prior``, ``rule_prior_bound_s``, ``rule_prior_relative``) of a saved DQN policy and how it
+    decides (a fleet tick ``in_turn``, its ``switch_margin_s``), so that a policy can be rebuilt to load
+    it and act as it was trained.
 
     Raises:
         CheckpointError: ``agent`` is not a DQN agent's state.

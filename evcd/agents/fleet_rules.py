@@ -34,6 +34,7 @@ import numpy as np
 from evcd.agents.base import EpisodeState
 from evcd.agents.heuristics import Observed, QueueAwareAgent
 from evcd.agents.in_turn import counted_at
+from evcd.agents.switching import keep_station
 from evcd.utils.validation import check_real
 
 
@@ -76,9 +77,7 @@ class ReservationAgent(QueueAwareAgent):
     def keep(self, scores: np.ndarray, current: int) -> int:
         """The station of smallest score (ties: the lowest index), unless ``current`` (>= 0) is within
         ``switch_margin_s`` of it (a margin of 0 never keeps: the plain rule)."""
-        best = int(np.argmin(scores))
-        margin = self.switch_margin_s
-        return current if margin > 0 and current >= 0 and scores[current] - scores[best] <= margin else best
+        return keep_station(scores, current, self.switch_margin_s)
 
     def decide(
         self, obs: np.ndarray, episodes: Sequence[FleetRuleEpisode], explore: bool = False

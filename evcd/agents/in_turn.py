@@ -113,6 +113,7 @@ def learner_tick(
     choose: Callable[[int, int], int],
     store: Callable[[Any, Any], None],
     layout: str = "DNZH",
+    keep: Callable[[np.ndarray, int], int] | None = None,
 ) -> np.ndarray:
     """A learner's tick in turn: the rows of ``obs`` (``(k, 4m)``) in order of their best Q-value on
     the tick's observations (the soonest expected charge first; ties to the lower row), each deciding
@@ -127,6 +128,9 @@ def learner_tick(
         q_values: the network's Q-values of a row or a batch.
         choose: ``choose(row, greedy)`` -> the action of EV ``row`` (exploration included).
         layout: the rows' blocks (:func:`decide_in_turn`).
+        keep: ``keep(q, current)`` -> the greedy station of an EV given its Q-values and the station it
+            is counted at (-1: unknown; a switching margin, :mod:`evcd.agents.switching`); ``None``:
+            the argmax.
 
     Raises:
         ValueError: ``obs`` is not ``(k, 4m)`` with one row per episode.
@@ -135,9 +139,10 @@ def learner_tick(
     if batch.ndim != 2 or len(batch) != len(episodes):
         raise ValueError(f"observations of shape {batch.shape} for {len(episodes)} episodes: one row each")
     order = np.argsort(-q_values(batch).max(axis=1), kind="stable")
-    d = batch[:, : len(vehicle)]
-    pick = lambda j, row: choose(j, int(q_values(row).argmax()))  # noqa: E731
-    stations, seen = decide_in_turn(batch, counted_at(d, episodes), vehicle, order, pick, layout)
+    counted = counted_at(batch[:, : len(vehicle)], episodes)
+    greedy = (lambda q, c: int(q.argmax())) if keep is None else keep
+    pick = lambda j, row: choose(j, greedy(q_values(row), int(counted[j])))  # noqa: E731
+    stations, seen = decide_in_turn(batch, counted, vehicle, order, pick, layout)
     for episode, s, row in zip(episodes, stations, seen, strict=True):
         episode.station, episode.seen = int(s), row
         if episode.held is not None:

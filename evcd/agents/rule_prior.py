@@ -27,6 +27,15 @@ value: ``Q(s, a) = prior(max(0, E_a + b tanh(c(s)[a])))``, the rule's seconds mo
 either way. An additive correction of a few tenths reorders stations the discount has squeezed
 together (at ``gamma`` 0.9 a station 20 minutes from charging and one 40 minutes away differ by 0.18);
 in seconds, a correction cannot send an EV to a queue the rule puts more than ``2 b`` longer.
+
+The bounded correction can also learn one shift for every station: where the rule's estimate is
+biased (every station reached sooner than it says), bootstrapped targets push all corrections to
+``-b`` together (measured: docs/PERTURBED.md "A margin against switching"). The shift alone keeps the
+rule's order, but with the floor at 0 every station the rule puts within ``b`` seconds ties at 0 and
+the lowest index wins. With ``relative`` (``DQNConfig.rule_prior_relative``) the network moves each
+station by its correction less their mean, ``Q(s, a) = prior(E_a + b tanh(c_a - mean(c)))``, without
+the floor (``prior`` of negative seconds is a return above 0, still in order): a correction of every
+station alike is none, so the bound is spent on the stations' order.
 """
 
 from __future__ import annotations
@@ -76,6 +85,8 @@ class RulePriorQ(nn.Module):
         reward_scale: the learner's reward scale.
         bound_s: ``None`` (the network's output is added to the prior) or the most seconds the
             network's correction moves the estimate either way (``prior(E + bound_s tanh(c))``).
+        relative: with ``bound_s``, each station's correction less the stations' mean, without the
+            floor at 0 (module docstring).
 
     Raises:
         ValueError: ``slot_s`` or ``bound_s`` not above 0, or ``gamma`` outside (0, 1].
@@ -90,12 +101,15 @@ class RulePriorQ(nn.Module):
         gamma: float,
         reward_scale: float,
         bound_s: float | None = None,
+        relative: bool = False,
     ) -> None:
         super().__init__()
         if not slot_s > 0:
             raise ValueError(f"rule_prior: decision_interval={slot_s!r} must be > 0 (seconds per slot)")
         if bound_s is not None and not bound_s > 0:
             raise ValueError(f"rule_prior_bound_s={bound_s!r} must be > 0 (seconds) or None")
+        if relative and bound_s is None:
+            raise ValueError("rule_prior_relative=True centres the bounded correction: give bound_s")
         if not 0.0 < gamma <= 1.0:
             raise ValueError(f"rule_prior: gamma={gamma!r} must be in (0, 1]")
         zero_output_layers(correction)
@@ -107,6 +121,7 @@ class RulePriorQ(nn.Module):
         self.register_buffer("reward_scale", torch.tensor(float(reward_scale)))
         #: the correction's bound in estimate units (the checkpoint's config holds it: not saved here)
         self.bound = None if bound_s is None else float(bound_s) / ESTIMATE_UNIT_S
+        self.relative = bool(relative)
 
     def prior(self, estimate: torch.Tensor) -> torch.Tensor:
         """The prior Q-values ``(..., m)`` of the estimate block (in ``ESTIMATE_UNIT_S``)."""
@@ -119,8 +134,10 @@ class RulePriorQ(nn.Module):
         seen = x if self.reads_estimate else x[..., : -self.n_stations]
         if self.bound is None:
             return self.prior(estimate) + self.correction(seen)
-        moved = estimate + self.bound * torch.tanh(self.correction(seen))
-        return self.prior(torch.clamp(moved, min=0.0))
+        c = self.correction(seen)
+        if self.relative:
+            return self.prior(estimate + self.bound * torch.tanh(c - c.mean(dim=-1, keepdim=True)))
+        return self.prior(torch.clamp(estimate + self.bound * torch.tanh(c), min=0.0))
 
 
 def prior_network(
@@ -128,8 +145,8 @@ def prior_network(
 ) -> RulePriorQ:
     """``net`` as the correction of a :class:`RulePriorQ` for a learner of ``config`` (a
     :class:`~evcd.agents.dqn_config.DQNConfig`: its ``rule_estimate``, ``gamma``, ``reward_scale``,
-    ``rule_prior_bound_s``) in
-    an environment of ``decision_interval`` seconds per slot and reward ``reward``.
+    ``rule_prior_bound_s``, ``rule_prior_relative``) in an environment of ``decision_interval`` seconds
+    per slot and reward ``reward``.
 
     Raises:
         ValueError: ``reward`` is not :data:`PRIOR_REWARD` (the prior is that reward's return), or no
@@ -144,4 +161,4 @@ def prior_network(
         raise ValueError("rule_prior=True needs the environment's decision_interval (seconds per slot): "
                          "build the agent for its environment (make_agent_for_env) or pass it")  # fmt: skip
     return RulePriorQ(net, n_stations, config.rule_estimate, float(decision_interval), config.gamma,
-                      config.reward_scale, config.rule_prior_bound_s)  # fmt: skip
+                      config.reward_scale, config.rule_prior_bound_s, config.rule_prior_relative)  # fmt: skip

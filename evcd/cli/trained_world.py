@@ -13,7 +13,7 @@ the run's latest checkpoint; a file holding an agent state alone says nothing.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,7 @@ from hydra.utils import to_absolute_path
 from evcd.loops.best_policy import BEST_DIR
 from evcd.loops.run_files import CHECKPOINTS
 from evcd.loops.train_state import config_diff
+from evcd.report.sweep import day_list
 from evcd.utils.checkpoint import has_checkpoint, load_checkpoint
 
 #: The top-level blocks that shape the world an agent meets, on either task.
@@ -52,12 +53,12 @@ def trained_world(saved: Mapping[str, Any] | None, current: Mapping[str, Any]) -
     before["env"] = {k: v for k, v in trained_env.items() if k not in ENV_FREE}
     now["env"] = {k: v for k, v in env.items() if k not in ENV_FREE}
     days = _mapping(saved.get("days"))
-    trained_on = _ints(days.get("train", trained_env.get("demand_seeds")))
-    evaluated = set(_ints(env.get("demand_seeds")))
+    trained_on = list(day_list(days.get("train", trained_env.get("demand_seeds"))))
+    evaluated = set(day_list(env.get("demand_seeds")))
     return {
         "differences": config_diff(before, now, what="the trained policy"),
         "training_days": sorted(evaluated & set(trained_on)),
-        "tuning_days": sorted(evaluated & set(_ints(days.get("tuning")))),
+        "tuning_days": sorted(evaluated & set(day_list(days.get("tuning")))),
         "forecast_days": _forecast_days(trained_env, env, trained_on),
     }
 
@@ -97,8 +98,8 @@ def _forecast_days(
     if "forecast" not in (trained_env.get("observe") or ()):
         return None
     before = trained_env.get("forecast_days")
-    before = _ints(before) if before is not None else trained_on
-    now = _ints(env.get("forecast_days"))
+    before = list(day_list(before)) if before is not None else trained_on
+    now = list(day_list(env.get("forecast_days")))
     return None if sorted(before) == sorted(now) else f"{sorted(before)} -> {sorted(now)}"
 
 
@@ -112,7 +113,3 @@ def _resolved(block: str, value: Any) -> Any:
 
 def _mapping(value: Any) -> Mapping[str, Any]:
     return value if isinstance(value, Mapping) else {}
-
-
-def _ints(value: Any) -> list[int]:
-    return [int(v) for v in value] if isinstance(value, Sequence) and not isinstance(value, str) else []

@@ -191,8 +191,9 @@ def config_diff(
 ) -> list[str]:
     """``"key: saved -> current"`` for every setting that differs (nested keys dotted), but those of
     :data:`RESUME_FREE_KEYS` and a setting the saved run did not have that is off now (``false``,
-    ``null`` or ``[]``): an option added to evcd since the checkpoint, at the value that keeps what
-    the run did (evcd's options are off by default; logged, beginning with ``what``)."""
+    ``null``, ``[]`` or a number 0, e.g. a margin): an option added to evcd since the checkpoint, at
+    the value that keeps what the run did (evcd's options are off by default; logged, beginning with
+    ``what``)."""
     keys = sorted(set(saved) | set(current))
     out = []
     for key in keys:
@@ -211,8 +212,9 @@ def config_diff(
 
 
 def _is_off(value: Any) -> bool:
-    """``False``, ``None`` or an empty list: an option that is off."""
-    return value is False or value is None or (isinstance(value, list | tuple) and not value)
+    """``False``, ``None``, an empty list or a number 0 (not a bool): an option that is off."""
+    zero = isinstance(value, int | float) and not isinstance(value, bool) and value == 0
+    return value is False or value is None or zero or (isinstance(value, list | tuple) and not value)
 
 
 def save_training(run_dir: Path, agent: Agent, state: SavedState, config: Mapping[str, Any] | None) -> None:

@@ -220,8 +220,9 @@ def _float(value: Any) -> float:
     return math.nan if value is None else float(value)
 
 
-def _days(value: Any) -> tuple[int, ...]:
-    return tuple(int(d) for d in value) if isinstance(value, list | tuple) else ()
+def day_list(value: Any) -> tuple[int, ...]:
+    """The days of a saved config's list (any sequence but a string; anything else: none)."""
+    return tuple(int(d) for d in value) if isinstance(value, Sequence) and not isinstance(value, str) else ()
 
 
 def world_label(config: Mapping[str, Any]) -> str:
@@ -280,8 +281,8 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
         train_mean_travel_time=_float(training.get("mean_travel_time")),
         train_wall_s=_float(training.get("wall_s", 0.0)),
         day_build_s=_float(training.get("day_build_s", 0.0)),
-        train_days=_days((config.get("train") or {}).get("days")),
-        eval_days=tuple(played) if played else _days(configured),
+        train_days=day_list((config.get("train") or {}).get("days")),
+        eval_days=tuple(played) if played else day_list(configured),
         day_means=tuple(day_means),
         job_dir=job_dir,
         episode_travel=travel,

@@ -1097,6 +1097,8 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
         "rule_estimate": False,
         "rule_prior": False,
         "rule_prior_bound_s": None,
+        "rule_prior_relative": False,
+        "switch_margin_s": 0.0,
     }
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")

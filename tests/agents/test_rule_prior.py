@@ -212,3 +212,68 @@ def test_the_bound_is_checked_and_kept_by_checkpoints(tmp_path) -> None:
     _agent("dqn", seed=3).load_state_dict(old, policy_only=True)
     with pytest.raises(CheckpointError, match=r"bound_s=None; this one has rule_prior_bound_s=120\.0"):
         _agent("dqn", rule_prior_bound_s=120.0).load_state_dict(old, policy_only=True)
+
+
+def test_a_relative_correction_moves_each_station_by_its_part_beyond_the_mean_by_hand() -> None:
+    head = torch.nn.Sequential(torch.nn.Linear(M, M))
+    q = RulePriorQ(head, M, False, 60.0, 0.9, 10.0, bound_s=120.0, relative=True)
+    x = _estimate_input([100.0, 600.0, 3000.0])
+    # one shift of every station (what a biased estimate teaches) is no correction: the rule's return
+    with torch.no_grad():
+        head[0].bias.copy_(torch.tensor([-10.0, -10.0, -10.0]))
+    expected = time_return(torch.tensor([[100.0, 600.0, 3000.0]]), 60.0, 0.9, 10.0)
+    np.testing.assert_allclose(q(x).detach().numpy(), expected.numpy(), rtol=1e-6)
+    # each station moves by bound x tanh(c - mean c); below 0 s there is no floor (a return above 0)
+    with torch.no_grad():
+        head[0].bias.copy_(torch.tensor([-10.0, 0.5, 10.0]))  # mean 1/6
+    c = torch.tensor([-10.0, 0.5, 10.0])
+    moved = torch.tensor([100.0, 600.0, 3000.0]) + 120.0 * torch.tanh(c - c.mean())
+    assert float(moved[0]) < 0.0
+    np.testing.assert_allclose(q(x).detach().numpy(), time_return(moved[None], 60.0, 0.9, 10.0).numpy(),
+                               rtol=1e-5)  # fmt: skip
+    assert float(q(x).detach()[0, 0]) > 0.0
+
+
+def test_saturated_corrections_keep_the_rules_order_only_when_relative() -> None:
+    # every correction at -bound: with the floor, the stations within the bound tie at 0 and the lowest
+    # index wins; relative, the shift is none and the rule's nearest station stays the best
+    x = _estimate_input([250.0, 100.0, 3000.0])
+    for relative, best in [(False, 0), (True, 1)]:
+        head = torch.nn.Sequential(torch.nn.Linear(M, M))
+        q = RulePriorQ(head, M, False, 60.0, 0.9, 10.0, bound_s=300.0, relative=relative)
+        with torch.no_grad():
+            head[0].bias.fill_(-20.0)
+        assert int(q(x).argmax()) == best
+
+
+def test_the_relative_setting_is_checked_and_kept_by_checkpoints(tmp_path) -> None:
+    with pytest.raises(ValueError, match="rule_prior_relative=true centres the bounded correction"):
+        _agent(rule_prior_relative=True)
+    agent = _agent("dueling_ddqn", network="station", rule_prior_bound_s=300.0, rule_prior_relative=True)
+    obs = _fleet_obs(50)
+    plain = _agent("dueling_ddqn", network="station")
+    np.testing.assert_allclose(agent.q_values(obs), plain.q_values(obs), rtol=1e-6)  # untrained: the prior
+    save_checkpoint(tmp_path, agent.state_dict(), "agent")
+    assert saved_options(tmp_path)["rule_prior_relative"] is True
+    with pytest.raises(CheckpointError, match="relative=True; this one has rule_prior_relative=False"):
+        _agent("dueling_ddqn", network="station", rule_prior_bound_s=300.0).load_state_dict(
+            agent.state_dict(), policy_only=True
+        )
+    # a checkpoint from before the setting existed has the floor
+    old = _agent("dqn", rule_prior_bound_s=300.0).state_dict()
+    del old["config"]["rule_prior_relative"]
+    _agent("dqn", seed=3, rule_prior_bound_s=300.0).load_state_dict(old, policy_only=True)
+
+
+def test_a_relative_learner_learns_a_stations_order_within_its_bound() -> None:
+    # as the bounded learner above: station 2 always ends in charging at once; relative, it still moves
+    # its estimate down by at most the bound (the others' corrections are what it is measured against)
+    agent = _agent("dqn", blocks="DNZH", network="station", learning_starts=8, lr=1e-2,
+                   rule_prior_bound_s=300.0, rule_prior_relative=True)  # fmt: skip
+    plain = _agent("dqn", blocks="DNZH", network="station")
+    one = np.array([1200.0, 600.0, 900.0, 0, 0, 0, 1, 0, 2, 0, 0, 0], dtype=np.float32)
+    for _ in range(300):
+        agent.observe(Transition(one, 2, -0.05, one, True, False))
+    floor = float(time_return(torch.tensor(675.0 - 300.0), 60.0, 0.9, 10.0))
+    q2 = float(agent.q_values(one)[2])
+    assert floor - 1e-4 <= q2 and q2 > float(plain.q_values(one)[2]) + 0.2
