@@ -30,7 +30,7 @@ in seconds, a correction cannot send an EV to a queue the rule puts more than ``
 
 The bounded correction can also learn one shift for every station: where the rule's estimate is
 biased (every station reached sooner than it says), bootstrapped targets push all corrections to
-``-b`` together (measured: docs/PERTURBED.md "A margin against switching"). The shift alone keeps the
+``-b`` together (measured: docs/PERTURBED.md "Corrections that saturate"). The shift alone keeps the
 rule's order, but with the floor at 0 every station the rule puts within ``b`` seconds ties at 0 and
 the lowest index wins. With ``relative`` (``DQNConfig.rule_prior_relative``) the network moves each
 station by its correction less their mean, ``Q(s, a) = prior(E_a + b tanh(c_a - mean(c)))``, without
