@@ -9,8 +9,12 @@ regime, the perturbations it played and the observation blocks its agents saw
 times [95% t], and its difference with each ``--reference`` row, paired by episode within each seed
 (runs of a seed play the same episodes), mean over seeds [95% t] n=seeds; A lower / B lower of pairs.
 Fleet runs (``experiment=fleet``) pair by fleet episode on the guided EVs' mean travel time
-(``--fleet-measure``: or ``guided_travel_censored``, ``all_travel``). Prints the table and writes it
-to ``--out`` (refusing to overwrite).
+(``--fleet-measure``: or ``guided_travel_censored``, ``all_travel``). ``--against-calm`` adds what
+each perturbed world does to each dispatcher: its row minus the same dispatcher in the calm runs of
+the same regime and observation, paired the same way, with each seed's difference (the by-kind
+tables of docs/PERTURBED.md). Prints the table and writes it to ``--out`` (refusing to overwrite).
+
+    python scripts/compare_runs.py <sweep with perturbations=none,incidents_peak,outages_peak> --against-calm
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=None, help="write the table here (Markdown)")
     p.add_argument("--fleet-measure", choices=FLEET_MEASURES, default="guided_travel",
                    help="what fleet runs compare (default: the guided EVs' mean travel time)")  # fmt: skip
+    p.add_argument("--against-calm", action="store_true",
+                   help="each perturbed row minus the same dispatcher in its regime's calm runs")  # fmt: skip
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     runs = Runs.read(args.dirs, args.fleet_measure)
@@ -48,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None and args.out.exists():
         log.error("%s exists: nothing is overwritten", args.out)
         return 2
-    table = compare_markdown(runs, refs)
+    table = compare_markdown(runs, refs, args.against_calm)
     print(table)
     if args.out is not None:
         atomic_write_text(args.out, table + "\n")

@@ -46,6 +46,8 @@ class Runs:
     travel: dict[Row, dict[int, dict[int, float]]]
     #: the task of each row's runs ("single" or "fleet")
     task: dict[Row, str] = field(default_factory=dict)
+    #: each world's calm counterpart: the same regime and observation without perturbations
+    calm_world: dict[str, str] = field(default_factory=dict)
 
     @classmethod
     def read(cls, dirs: Sequence[Path], fleet_measure: str = "guided_travel") -> Runs:
@@ -63,6 +65,7 @@ class Runs:
         for results in sorted(found):
             data = json.loads(results.read_text())
             world, seed = world_label(data["config"]), int(data["seed"])
+            runs.calm_world[world] = world_label({**data["config"], "perturbations": None})
             task = str(data.get("task", "single"))
             fleet = task == "fleet"
             files = {str(data["agent"]): results.parent / (FLEET_CSV if fleet else EVAL_CSV)}
@@ -102,6 +105,24 @@ class Runs:
                            if math.isfinite(ta[k]) and math.isfinite(tb[k])]  # fmt: skip
         return paired_stat(diffs)
 
+    def against_calm(self, row: Row) -> PairedStat | None:
+        """``row`` minus the same dispatcher in the calm counterpart of its world (the same regime
+        and observation, no perturbation), paired by episode (``None``: a calm world, or no calm
+        run of that dispatcher)."""
+        world, agent = row
+        calm = (self.calm_world.get(world, world), agent)
+        if calm[0] == world or calm not in self.travel:
+            return None
+        return self.paired(row, calm)
+
+
+def _by_seed(p: PairedStat) -> str:
+    """Each seed's mean difference, e.g. ``seeds 0 / 1: -4.0 / +9.1``."""
+    seeds = sorted(p.per_seed)
+    return f"seed{'s' if len(seeds) > 1 else ''} {' / '.join(map(str, seeds))}: " + " / ".join(
+        f"{p.per_seed[s]:+.1f}" for s in seeds
+    )
+
 
 def _same(a: dict[int, float], b: dict[int, float]) -> bool:
     """Whether two runs' episodes hold the same numbers (NaN equal to NaN)."""
@@ -121,15 +142,18 @@ def _episodes(path: Path) -> dict[int, float]:
     return {int(r.seed): math.nan if r.truncated else float(r.travel_time) for r in read_episodes_csv(path)}
 
 
-def compare_markdown(runs: Runs, references: Sequence[Row]) -> str:
+def compare_markdown(runs: Runs, references: Sequence[Row], against_calm: bool = False) -> str:
     """A table: per (world, dispatcher), the mean over seeds and its paired difference with each
-    reference row (mean over seeds of the per-seed mean differences [95% t])."""
+    reference row (mean over seeds of the per-seed mean differences [95% t]); with ``against_calm``,
+    a last column: each perturbed row minus the same dispatcher calm (:meth:`Runs.against_calm`),
+    what the world's perturbations do to each dispatcher, with its seeds' differences."""
     header = [
         "world",
         "dispatcher",
         "seeds",
         "mean travel time (s)",
         *(f"- {w} / {a}" for w, a in references),
+        *(["- the same dispatcher calm (per seed)"] if against_calm else []),
     ]
     lines = []
     for row in runs.rows():
@@ -138,5 +162,8 @@ def compare_markdown(runs: Runs, references: Sequence[Row]) -> str:
         for ref in references:
             p = runs.paired(row, ref) if ref != row else None
             cells.append(paired_cell(p) if p is not None else "")
+        if against_calm:
+            p = runs.against_calm(row)
+            cells.append("" if p is None else f"{paired_cell(p)} ({_by_seed(p)})")
         lines.append([row[0], row[1], str(n), mean, *cells])
     return "\n".join(markdown_table(header, lines))

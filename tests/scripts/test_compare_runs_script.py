@@ -88,3 +88,40 @@ def test_a_fleet_row_is_never_paired_with_a_single_targets():
                 {("fleet", "greedy"): "fleet", ("peak", "greedy"): "single"})  # fmt: skip
     assert runs.paired(("fleet", "greedy"), ("peak", "greedy")) is None
     assert runs.paired(("fleet", "greedy"), ("fleet", "greedy")) is not None
+
+
+def test_against_calm_pairs_each_perturbed_row_with_its_dispatcher_calm(script_overrides, tmp_path):
+    """``--against-calm``: a perturbed row minus the same dispatcher in the calm run of its regime and
+    observation; the per-seed difference is the two runs' mean travel times apart (no episode
+    truncated, the same episodes); a perturbed world without a calm run of its observation, and the
+    calm rows, get none."""
+    outages = ["perturbations=outages", "perturbations.outages.per_day=20",
+               "perturbations.outages.start_window=[18000,23400]"]  # fmt: skip
+    worlds = {"calm": [], "outages": outages, "outages_sees": [*outages, "env.observe=[points_in_service]"]}
+    for name, extra in worlds.items():
+        proc = run_script("train.py", *script_overrides, "agent=queue_aware", "eval.episodes=4",
+                          "eval.baselines=[greedy]", *extra, f"hydra.run.dir={tmp_path / name}")  # fmt: skip
+        assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    runs = Runs.read([tmp_path])
+    assert runs.calm_world["peak +outages sees P"] == "peak sees P"
+    summary = {
+        n: json.loads((tmp_path / n / "results.json").read_text())["summary"] for n in ("calm", "outages")
+    }
+    assert summary["calm"]["truncated"] == summary["outages"]["truncated"] == 0
+    p = runs.against_calm(("peak +outages", "queue_aware"))
+    assert p is not None and p.pairs == 4
+    assert p.per_seed[0] == pytest.approx(
+        summary["outages"]["mean_travel_time"] - summary["calm"]["mean_travel_time"]
+    )
+    assert runs.against_calm(("peak", "queue_aware")) is None
+    assert runs.against_calm(("peak +outages sees P", "queue_aware")) is None
+    proc = run_script("compare_runs.py", str(tmp_path), "--against-calm")
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    lines = {tuple(c.strip() for c in line.strip("|").split("|")[:2]): line.strip("|").split("|")[-1].strip()
+             for line in proc.stdout.splitlines()[2:] if line.startswith("|")}  # fmt: skip
+    assert proc.stdout.splitlines()[0].endswith("- the same dispatcher calm (per seed) |")
+    assert lines["peak +outages", "queue_aware"].endswith(f"(seed 0: {p.per_seed[0]:+.1f})")
+    assert lines["peak +outages", "greedy"].startswith(
+        f"{runs.against_calm(('peak +outages', 'greedy')).stat.mean:+.1f}"
+    )
+    assert lines["peak", "greedy"] == lines["peak +outages sees P", "queue_aware"] == ""
