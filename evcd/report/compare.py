@@ -27,7 +27,7 @@ import numpy as np
 
 from evcd.loops.run_files import EVAL_CSV, FLEET_CSV, RESULTS_JSON, baseline_csv, read_episodes_csv
 from evcd.report.markdown import markdown_table
-from evcd.report.paired import PairedStat, paired_cell, paired_stat
+from evcd.report.paired import PairedStat, paired_cell, paired_stat, per_seed_text
 from evcd.report.seed_stats import seed_interval
 from evcd.report.sweep import world_label
 
@@ -116,14 +116,6 @@ class Runs:
         return self.paired(row, calm)
 
 
-def _by_seed(p: PairedStat) -> str:
-    """Each seed's mean difference, e.g. ``seeds 0 / 1: -4.0 / +9.1``."""
-    seeds = sorted(p.per_seed)
-    return f"seed{'s' if len(seeds) > 1 else ''} {' / '.join(map(str, seeds))}: " + " / ".join(
-        f"{p.per_seed[s]:+.1f}" for s in seeds
-    )
-
-
 def _same(a: dict[int, float], b: dict[int, float]) -> bool:
     """Whether two runs' episodes hold the same numbers (NaN equal to NaN)."""
     if a.keys() != b.keys():
@@ -164,6 +156,6 @@ def compare_markdown(runs: Runs, references: Sequence[Row], against_calm: bool =
             cells.append(paired_cell(p) if p is not None else "")
         if against_calm:
             p = runs.against_calm(row)
-            cells.append("" if p is None else f"{paired_cell(p)} ({_by_seed(p)})")
+            cells.append("" if p is None else f"{paired_cell(p)} ({per_seed_text(p)})")
         lines.append([row[0], row[1], str(n), mean, *cells])
     return "\n".join(markdown_table(header, lines))

@@ -32,7 +32,7 @@ import numpy as np
 
 from evcd.report.figures import agent_colors, plot_results_bars, plot_validation_curves
 from evcd.report.markdown import format_stat, markdown_table, num
-from evcd.report.paired import PairedStat, paired_cell, paired_stat
+from evcd.report.paired import PairedStat, paired_cell, paired_stat, per_seed_text
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.sweep import Collection, ResultsError, WrongTaskError, collect, world_label
 from evcd.report.table import GAP_RULE, validation_gaps, validation_points, validation_rule_means
@@ -246,8 +246,7 @@ def fleet_markdown(collection: Collection) -> str:
                         cells_out.append("—")
                         continue
                     cells_out.append(paired_cell(p))
-                    spread = " / ".join(f"{s}: {d:+.1f}" for s, d in p.per_seed.items())
-                    per_seed.append([f"{a} - {b}", *_cell_label(c, regimes), spread])
+                    per_seed.append([f"{a} - {b}", *_cell_label(c, regimes), per_seed_text(p)])
                 rows.append([*_cell_label(c, regimes), *cells_out])
             lines += [
                 f"### Paired differences on {label} (s)",

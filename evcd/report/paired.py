@@ -82,6 +82,11 @@ def _signed(x: float) -> str:
     return f"{x:+.1f}" if math.isfinite(x) else "—"
 
 
+def per_seed_text(p: PairedStat) -> str:
+    """Each seed's mean difference, ``seed: difference`` joined by `` / `` (e.g. ``0: -4.0 / 1: +9.1``)."""
+    return " / ".join(f"{seed}: {_signed(d)}" for seed, d in p.per_seed.items())
+
+
 def paired_cell(p: PairedStat) -> str:
     """A table cell: the mean difference [interval across seeds] n=seeds; A lower / B lower of pairs."""
     s = p.stat
@@ -105,8 +110,7 @@ def paired_markdown(jobs: Sequence[JobResult]) -> list[str]:
                     cells.append("—")
                     continue
                 cells.append(paired_cell(p))
-                seeds = " / ".join(f"{seed}: {_signed(d)}" for seed, d in p.per_seed.items())
-                per_seed.append([f"{a} - {b}", str(evs), seeds])
+                per_seed.append([f"{a} - {b}", str(evs), per_seed_text(p)])
             rows.append([str(evs), *cells])
         lines += [
             "### Paired differences (s)",
