@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class, agent_defaults, make_agent_for_env
 from evcd.agents.saved_policy import saved_run
-from evcd.cli.errors import stop_on_bad_setting
+from evcd.cli.errors import refuse_removed_settings, stop_on_bad_setting
 from evcd.cli.params import agent_params
 from evcd.cli.run_record import write_run_record
 from evcd.cli.trained_world import run_config, trained_world, warnings
@@ -58,10 +59,8 @@ def trained_policy(
 ) -> tuple[dict[str, Any], Mapping[str, Any] | None, Mapping[str, Any] | None]:
     """The agent's arguments and, for a learner, its trained policy (``agent.checkpoint``), whose
     network settings replace the agent block's (:meth:`~evcd.agents.Agent.checkpoint_options`: the
-    policy is rebuilt as it was trained) but for its decision options given in the agent block
-    (:attr:`~evcd.agents.Agent.decision_options`, e.g. ``+agent.switch_margin_s=120``), and the
-    config of the run that trained it (where the checkpoint holds one); load the policy into the
-    agent once it is made.
+    policy is rebuilt as it was trained), and the config of the run that trained it (where the
+    checkpoint holds one); load the policy into the agent once it is made.
 
     Raises:
         ValueError: a learner without ``agent.checkpoint``.
@@ -88,8 +87,7 @@ def trained_policy(
                               f"{ {k: implied[k] for k in clash} }: evaluate it under the name it was "
                               "trained as")  # fmt: skip
     log.info("%s: the trained policy of %s", name, path)
-    given = {key: params[key] for key in agent_class(name).decision_options if key in params}
-    return {**params, **options, **given}, policy, trained_config
+    return {**params, **options}, policy, trained_config
 
 
 def run(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
@@ -193,4 +191,5 @@ def main(cfg: DictConfig) -> float:
 
 
 if __name__ == "__main__":
+    refuse_removed_settings(sys.argv[1:], log)
     main()

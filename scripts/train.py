@@ -20,6 +20,7 @@ only that job fails; the others run, then the sweep exits with code 1).
 from __future__ import annotations
 
 import logging
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +30,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class, make_agent_for_env
-from evcd.cli.errors import stop_on_bad_setting
+from evcd.cli.errors import refuse_removed_settings, stop_on_bad_setting
 from evcd.cli.params import agent_params, check_learner_overrides, learner_config
 from evcd.cli.run_record import write_run_record
 from evcd.env import ChargingNavEnv
@@ -97,7 +98,6 @@ def _settings(cfg: DictConfig, seed: int, min_episodes: int) -> dict[str, Any]:
             cfg.train.validation.every,
             cfg.train.validation.episodes,
             cfg.train.validation.select_best,
-            cfg.train.validation.at_start,
         ),
     }
 
@@ -298,4 +298,5 @@ def main(cfg: DictConfig) -> float:
 
 
 if __name__ == "__main__":
+    refuse_removed_settings(sys.argv[1:], log)
     main()

@@ -194,11 +194,8 @@ class Agent(ABC):
     #: The constructor arguments :meth:`env_kwargs` reads off an environment (accepted as options too).
     env_options: ClassVar[tuple[str, ...]] = ()
     #: Whether the constructor takes ``config``, the run's ``learner`` block
-    #: (:class:`~evcd.agents.dqn_config.DQNConfig`: the DQN learners' hyperparameters).
+    #: (:class:`~evcd.agents.dqn.DQNConfig`: the DQN learners' hyperparameters).
     learner_block: ClassVar[bool] = False
-    #: The settings of how a saved policy decides that an evaluation may set otherwise than in training
-    #: (given as options, they win over :meth:`checkpoint_options`; e.g. a switching margin).
-    decision_options: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, n_stations: int, rng: np.random.Generator) -> None:
         self.n_stations = check_int("n_stations", n_stations, minimum=1)

@@ -1,40 +1,39 @@
-"""DQN and Dueling Double DQN: one agent class, two switches.
+"""DQN and Dueling Double DQN: one learner, two switches, read top to bottom.
 
     agent = DQNAgent(n_stations=5, rng=rng, config=DQNConfig(lr=1e-3), double=True, dueling=True)
     action = agent.act(obs, explore=True)                                   # epsilon-greedy
     agent.observe(Transition(obs, action, reward, next_obs, terminated, truncated))   # learns
 
-- The hyperparameters are one :class:`~evcd.agents.dqn_config.DQNConfig` (the agent takes it whole).
-- ``dueling`` picks the network (:mod:`evcd.agents.networks`); ``double`` the target: DQN bootstraps
-  from ``max_a Q_target(s', a)``, Double DQN from ``Q_target(s', argmax_a Q_online(s', a))``.
-- Replay is prioritized (:mod:`evcd.agents.replay`): priorities ``(|TD error| + eps) ** alpha``,
-  importance weights with ``beta`` annealed linearly to 1; ``alpha = 0`` is uniform replay.
-- ``terminated`` (the target started charging) cuts the bootstrap; ``truncated`` does not.
-- Exploration is epsilon-greedy, epsilon linear from ``epsilon_start`` to ``epsilon_end`` over
-  ``exploration_steps`` transitions, per slot or per episode (:class:`DQNEpisode`); its draws come
-  from the episode's generator (so an episode does not depend on those run before it), replay
-  sampling from the agent's own generator, drawn from ``rng`` at construction.
-- On the fleet (``[D, N, Z, H]``), ``in_turn`` decides the EVs of one tick one after the other, each
-  seeing the stations chosen before it (:mod:`evcd.agents.in_turn`).
-- The network's input is the observation in physical units (m, vehicles) times :attr:`input_scale`:
-  km, tens of vehicles and multiples of the charging points for an agent made for an environment
-  (``points``), whether that environment normalises its observations or not (``normalized``); a
-  checkpoint keeps the scale, so a loaded policy always sees what it was trained on. With
-  ``rule_estimate`` the network also reads the rule's estimated seconds to each station's start of
-  charging, computed from the observation (:mod:`evcd.agents.rule_input`); with ``rule_prior`` the
-  Q-value is that estimate as a return plus the network's output, zero at first (:mod:`evcd.agents.
-  rule_prior`).
+1. **Settings**: :class:`DQNConfig`, declared once (Hydra's ``learner`` block is built from it).
+2. **Acting**: the policy (:class:`~evcd.agents.q_policy.QPolicy`: the networks and what they read)
+   gives each episode's greedy station; while exploring, epsilon-greedy with epsilon linear from
+   ``epsilon_start`` to ``epsilon_end`` over ``exploration_steps`` transitions, drawn per slot or once
+   per episode (:class:`DQNEpisode`), from the episode's own generator (so an episode does not depend
+   on those run before it).
+3. **Storing**: each episode keeps an n-step window; a transition is stored once the ``n - 1`` after it
+   are known (or its episode ended), its reward the discounted sum of the (up to) ``n`` rewards, its
+   next observation the one ``n`` steps on, its bootstrap discounted by ``gamma ** n``. Replay is
+   prioritized (:mod:`evcd.agents.replay`): priorities ``(|TD error| + eps) ** alpha``, importance
+   weights with ``beta`` annealed linearly to 1; ``alpha = 0`` is uniform replay.
+4. **Learning**: every ``train_freq`` transitions after ``learning_starts``, ``gradient_steps`` steps of
+   the TD update (:meth:`DQNAgent.learn`): DQN bootstraps from ``max_a Q_target(s', a)``, Double DQN
+   from ``Q_target(s', argmax_a Q_online(s', a))``; ``terminated`` (charging started) cuts the
+   bootstrap, ``truncated`` does not. The loss (MSE or Huber) is weighted by the importance weights,
+   the gradient's norm clipped; the target network follows every ``target_update`` gradient steps
+   (a copy, or Polyak averaging with ``tau`` < 1).
 
-No global random state is touched: the networks are initialised inside ``torch.random.fork_rng``
-from a seed drawn from ``rng``. :meth:`DQNAgent.state_dict` holds everything a resumed run needs.
+No global random state is touched: the networks are initialised from a seed drawn from ``rng``, replay
+sampling draws from the agent's own generator, drawn from ``rng`` next. :meth:`DQNAgent.state_dict`
+holds everything a resumed run needs.
 """
 
 from __future__ import annotations
 
 import copy
 import logging
+from collections import deque
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -45,26 +44,164 @@ from torch.nn import functional as F  # noqa: N812  (torch's convention)
 
 from evcd.agents.base import (
     Agent,
+    EpisodeState,
     Transition,
     layout_option,
     observation_letters,
     observation_units,
 )
-from evcd.agents.dqn_config import DQNConfig, linear_schedule
-from evcd.agents.dqn_episode import DQNEpisode
-from evcd.agents.dqn_state import CHECKED_SETTINGS, STATE_FORMAT, check_policy_state, policy_settings
-from evcd.agents.in_turn import hold, learner_tick
-from evcd.agents.inputs import input_factor, network_input, observation_divisors
-from evcd.agents.networks import make_q_network
+from evcd.agents.networks import NETWORKS, check_hidden
+from evcd.agents.q_policy import QPolicy, policy_settings
 from evcd.agents.replay import PrioritizedReplayBuffer
-from evcd.agents.rule_input import RuleEstimate
-from evcd.agents.rule_prior import prior_network
-from evcd.agents.switching import greedy_stations, learner_keep
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint, to_numpy
-from evcd.utils.validation import check_bool, with_overrides
+from evcd.utils.validation import check_bool, check_choice, check_int, check_real, with_overrides
 
 log = logging.getLogger(__name__)
-#: the agent's counters a checkpoint keeps, and their types
+
+LOSSES = ("mse", "huber")
+EXPLORATIONS = ("slot", "episode")
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """A DQN learner's hyperparameters; validated on creation (``ValueError`` naming the value).
+
+    Attributes:
+        hidden: hidden layer sizes of the network's trunk.
+        network: ``"mlp"`` (the paper's: one MLP reads the whole observation) or ``"station"`` (one
+            trunk shared by the stations scores each from its own features and its index,
+            :class:`~evcd.agents.networks.StationQNetwork`).
+        lr: Adam learning rate.
+        batch_size: transitions per gradient step.
+        buffer_size: replay capacity (transitions).
+        gamma: discount per decision slot.
+        n_step: rewards summed per stored transition (n-step returns; 1: one-step Q-learning).
+        learning_starts: transitions stored before the first gradient step.
+        train_freq: a round of learning every this many transitions.
+        gradient_steps: gradient steps per round.
+        target_update: gradient steps between target-network updates.
+        tau: target update ``target <- tau * online + (1 - tau) * target``; 1 is a hard copy.
+        epsilon_start: exploration rate at the first transition ...
+        epsilon_end: ... moving linearly to this ...
+        exploration_steps: ... over this many transitions.
+        exploration: ``"slot"`` (an epsilon-greedy draw at every decision, the textbook form) or
+            ``"episode"`` (one draw per episode: with probability epsilon the whole episode drives to
+            one random station, like the Random baseline, instead of zig-zagging).
+        alpha: priority exponent of the prioritized replay (0: uniform replay).
+        beta_start: importance-sampling exponent at the first transition, annealed linearly to 1 ...
+        beta_steps: ... over this many transitions.
+        priority_eps: added to ``|TD error|`` so that no priority is zero.
+        loss: ``"mse"`` (the paper's) or ``"huber"``; both weighted by the importance weights.
+        max_grad_norm: clip the gradient's global norm to this (``None``: no clipping).
+        reward_scale: rewards are multiplied by this before learning (the paper's reward reaches
+            tens; a scale keeps the regression targets near 1).
+    """
+
+    hidden: tuple[int, ...] = (512, 256)
+    network: str = "mlp"
+    lr: float = 1e-3
+    batch_size: int = 32
+    buffer_size: int = 10_000
+    gamma: float = 0.99
+    n_step: int = 1
+    learning_starts: int = 100
+    train_freq: int = 1
+    gradient_steps: int = 1
+    target_update: int = 8000
+    tau: float = 1.0
+    epsilon_start: float = 1.0
+    epsilon_end: float = 0.1
+    exploration_steps: int = 1000
+    exploration: str = "slot"
+    alpha: float = 0.6
+    beta_start: float = 0.4
+    beta_steps: int = 1000
+    priority_eps: float = 1e-6
+    loss: str = "mse"
+    max_grad_norm: float | None = 10.0
+    reward_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "hidden", check_hidden(self.hidden))
+        for key in ("batch_size", "buffer_size", "train_freq", "gradient_steps", "target_update", "n_step"):
+            check_int(key, getattr(self, key), minimum=1)
+        for key in ("learning_starts", "exploration_steps", "beta_steps"):
+            check_int(key, getattr(self, key), minimum=0)
+        if self.buffer_size < self.batch_size:
+            raise ValueError(f"buffer_size={self.buffer_size} < batch_size={self.batch_size}: the buffer "
+                             "must hold at least one batch")  # fmt: skip
+        for key in ("lr", "reward_scale", "priority_eps"):
+            check_real(key, getattr(self, key), low=0.0, low_open=True)
+        for key in ("gamma", "epsilon_start", "epsilon_end", "alpha", "beta_start"):
+            check_real(key, getattr(self, key), low=0.0, high=1.0)
+        check_real("tau", self.tau, low=0.0, high=1.0, low_open=True)
+        check_choice("network", self.network, NETWORKS)
+        check_choice("exploration", self.exploration, EXPLORATIONS)
+        check_choice("loss", self.loss, LOSSES)
+        if self.max_grad_norm is not None:
+            check_real("max_grad_norm", self.max_grad_norm, low=0.0, low_open=True)
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """The hyperparameters' names."""
+        return tuple(f.name for f in fields(cls))
+
+
+def linear_schedule(start: float, end: float, steps: int, t: int) -> float:
+    """``start`` moving linearly to ``end`` over ``steps`` steps, then ``end`` (``steps = 0``: ``end``)."""
+    if steps <= 0 or t >= steps:
+        return float(end)
+    return float(start + (end - start) * t / steps)
+
+
+@dataclass
+class DQNEpisode(EpisodeState):
+    """What a DQN learner keeps per episode: its exploration draw under ``exploration="episode"``
+    (made at its first decision while exploring: ``random_station`` is where the whole episode then
+    drives, ``None`` to follow the network) and its n-step window of transitions not stored yet."""
+
+    drawn: bool = False
+    random_station: int | None = None
+    pending: deque[Transition] = field(default_factory=deque)
+
+    def choose(self, greedy: int, epsilon: float, n_stations: int, exploration: str) -> int:
+        """The action of an exploring agent given the greedy one: epsilon-greedy per slot
+        (``"slot"``), or one draw at the episode's first decision (``"episode"``)."""
+        rng = self.rng
+        if exploration == "episode":
+            if not self.drawn:  # the episode's first decision: explore it or not
+                draw, station = rng.random(), int(rng.integers(n_stations))
+                self.drawn = True
+                self.random_station = station if draw < epsilon else None
+            return greedy if self.random_station is None else self.random_station
+        draw, station = rng.random(), int(rng.integers(n_stations))
+        return station if draw < epsilon else greedy
+
+    def windows(self, transition: Transition, n_step: int) -> list[tuple[Transition, ...]]:
+        """Add ``transition`` to the n-step window; return the windows to store now (each stores its
+        first transition with the rewards of the whole window): the full one, and once the episode
+        ended every one left."""
+        if n_step == 1:
+            return [(transition,)]
+        self.pending.append(transition)
+        out = []
+        if len(self.pending) == n_step:
+            out.append(tuple(self.pending))
+            self.pending.popleft()
+        if transition.terminated or transition.truncated:  # the episode ended: store what is left
+            out += self.flush()
+        return out
+
+    def flush(self) -> list[tuple[Transition, ...]]:
+        """The windows still pending (each stored bootstrapping from its last true observation)."""
+        out = []
+        while self.pending:
+            out.append(tuple(self.pending))
+            self.pending.popleft()
+        return out
+
+
+#: the learner's counters a checkpoint keeps, and their types
 _COUNTERS = {"steps": int, "gradient_steps": int, "target_updates": int, "loss_total": float,
              "q_total": float}  # fmt: skip
 
@@ -87,15 +224,13 @@ class DQNAgent(Agent):
         obs_blocks: 3 for ``[D, N, Z]``, 4 for the fleet's ``[D, N, Z, H]`` (one network for all its EVs),
             or a layout's letters with the observation options' blocks (e.g. ``"DNZP"``).
         checkpoint: load this checkpoint's policy (a training checkpoint or run directory) after building.
-        decision_interval, reward: the environment's slot (s) and reward name, for ``rule_prior``.
     """
 
     learns = True
     obs_blocks = (3, 4)
     options: ClassVar[Mapping[str, Any]] = {"double": False, "dueling": False, "checkpoint": None}
-    env_options = ("points", "normalized", "obs_blocks", "decision_interval", "reward")
+    env_options = ("points", "normalized", "obs_blocks")
     learner_block = True
-    decision_options = ("switch_margin_s",)
 
     def __init__(
         self,
@@ -109,45 +244,19 @@ class DQNAgent(Agent):
         normalized: bool = False,
         obs_blocks: int | str = 3,
         checkpoint: str | Path | None = None,
-        decision_interval: float | None = None,
-        reward: object = None,
         **hyperparameters: Any,
     ) -> None:
         super().__init__(n_stations, rng)
-        self.config = with_overrides("DQNAgent", DQNConfig, config, hyperparameters)
+        self.config = c = with_overrides("DQNAgent", DQNConfig, config, hyperparameters)
         self.double = check_bool("double", double)
         self.dueling = check_bool("dueling", dueling)
         self.layout = layout_option(obs_blocks)
-        self.blocks = len(self.layout)
-        self.obs_dim = self.blocks * self.n_stations
-        if self.config.in_turn and "H" not in self.layout:
-            raise ValueError(f"in_turn=True with observations {self.layout} ({self.blocks} blocks): in_turn "
-                             "is the fleet's (task=fleet, [D, N, Z, H]: the EVs of one tick decide one after "
-                             "the other); the single environment has one EV (in_turn=false)")  # fmt: skip
-        self.normalized = check_bool("normalized", normalized)
-        self._divisors = observation_divisors(points, self.n_stations, self.layout, self.normalized)
-        m = self.n_stations
-        #: one vehicle in the observation's Z and H units (in_turn's corrections)
-        self._vehicle = 1.0 / self._divisors[2 * m : 3 * m] if self.normalized else np.ones(m)
-        #: physical observation (m, vehicles) -> network input; saved with the networks
-        self.input_scale = np.ones(self.obs_dim, np.float32) if points is None else 1.0 / self._divisors
-        self._set_input_scale(self.input_scale)
-        cfg = self.config
-        #: the rule's estimate read beside the observation (rule_estimate), else None
-        reads = cfg.rule_estimate or cfg.rule_prior
-        self._estimate = RuleEstimate(m, self.layout, points, self.normalized) if reads else None
-        net_dim = self.obs_dim + (m if cfg.rule_estimate else 0)
-        init_seed = int(rng.integers(2**63 - 1))
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(init_seed)
-            self.online = make_q_network(net_dim, self.n_stations, cfg.hidden, self.dueling, cfg.network)
-        if cfg.rule_prior:  # the network becomes the correction to the rule's return
-            self.online = prior_network(self.online, m, cfg, decision_interval, reward)
-        #: keep(q, current) -> the greedy station within switch_margin_s (None: no margin, the argmax)
-        self._keep = learner_keep(cfg.switch_margin_s, decision_interval, reward, cfg.gamma, cfg.reward_scale)
-        self.target = copy.deepcopy(self.online).requires_grad_(False)
-        self.optimizer = torch.optim.Adam(self.online.parameters(), lr=cfg.lr)
-        self.replay = PrioritizedReplayBuffer(cfg.buffer_size, self.obs_dim, cfg.alpha, cfg.priority_eps)
+        normalized = check_bool("normalized", normalized)
+        seed = int(rng.integers(2**63 - 1))
+        self.policy = QPolicy(self.n_stations, self.layout, c.hidden, c.network, self.dueling, points,
+                              normalized, seed)  # fmt: skip
+        self.optimizer = torch.optim.Adam(self.policy.online.parameters(), lr=c.lr)
+        self.replay = PrioritizedReplayBuffer(c.buffer_size, self.policy.inputs.size, c.alpha, c.priority_eps)
         self.learn_rng = np.random.default_rng(rng.integers(2**63 - 1))
         self.steps = 0  # transitions observed
         self.gradient_steps = 0
@@ -157,7 +266,6 @@ class DQNAgent(Agent):
         if checkpoint is not None:
             self.load(checkpoint)
 
-    # ------------------------------------------------------------------ construction helpers
     @property
     def name(self) -> str:  # type: ignore[override]  (derived from the switches)
         """``dqn``, ``ddqn``, ``dueling_dqn`` or ``dueling_ddqn``."""
@@ -165,11 +273,8 @@ class DQNAgent(Agent):
 
     @classmethod
     def env_kwargs(cls, env: Any) -> dict[str, Any]:
-        """The env's charging points, whether it normalises, its observation's blocks, slot and reward
-        (``None`` where its config has none: ``rule_prior`` then refuses)."""
-        get = lambda key: getattr(env.unwrapped.config, key, None)  # noqa: E731
-        return {**observation_units(env), "obs_blocks": observation_letters(env),
-                "decision_interval": get("decision_interval"), "reward": get("reward")}  # fmt: skip
+        """The env's charging points, whether it normalises, and its observation's blocks."""
+        return {**observation_units(env), "obs_blocks": observation_letters(env)}
 
     @classmethod
     def option_names(cls) -> list[str]:
@@ -179,31 +284,19 @@ class DQNAgent(Agent):
 
     @classmethod
     def checkpoint_options(cls, policy: Mapping[str, Any]) -> dict[str, Any]:
-        """The network settings (``hidden``, ``network``, ``double``, ``dueling``, ``rule_estimate``) of a
-        saved policy and how it decides a fleet tick (``in_turn``).
+        """The network settings (``hidden``, ``network``, ``double``, ``dueling``) of a saved policy.
 
         Raises:
-            CheckpointError: ``policy`` is not a DQN agent's.
+            CheckpointError: ``policy`` is not a DQN agent's, or used a setting that left evcd.
         """
         return policy_settings(policy)
 
-    def _set_input_scale(self, scale: np.ndarray) -> None:
-        """Take ``scale`` (physical -> network) and derive the factor applied to observations."""
-        self.input_scale = np.asarray(scale, np.float32)
-        self._obs_to_input = input_factor(self.input_scale, self._divisors, self.normalized)
-
     def __repr__(self) -> str:
         c = self.config
-        switches = ("in_turn", "rule_estimate", "rule_prior")
-        turn = "".join(f", {n.replace('_', ' ')}" for n in switches if getattr(c, n))
-        turn += f" within {c.rule_prior_bound_s:g} s" if c.rule_prior_bound_s is not None else ""
-        turn += " relative" if c.rule_prior_relative else ""
-        turn += f", switch margin {c.switch_margin_s:g} s" if c.switch_margin_s > 0 else ""
         return (f"DQNAgent({self.name}, {c.network} {list(c.hidden)}, lr={c.lr:g}, batch={c.batch_size}, "
-                f"buffer={c.buffer_size}, alpha={c.alpha:g}, "
-                f"target_update={c.target_update}{turn})")  # fmt: skip
+                f"buffer={c.buffer_size}, alpha={c.alpha:g}, target_update={c.target_update})")  # fmt: skip
 
-    # ------------------------------------------------------------------ acting
+    # ------------------------------------------------------------------ schedules
     @property
     def epsilon(self) -> float:
         """The exploration rate now (a function of the transitions observed)."""
@@ -215,66 +308,32 @@ class DQNAgent(Agent):
         """The importance-sampling exponent now."""
         return min(1.0, linear_schedule(self.config.beta_start, 1.0, self.config.beta_steps, self.steps))
 
-    @property
-    def learning_rate(self) -> float:
-        """The learning rate of the next gradient step (``lr``, or its schedule to ``lr_end``)."""
-        c = self.config
-        return (
-            c.lr
-            if c.lr_end is None
-            else linear_schedule(c.lr, c.lr_end, c.lr_decay_steps, self.gradient_steps)
-        )
-
-    def _input(self, obs: np.ndarray) -> torch.Tensor:
-        x = network_input(obs, self._obs_to_input, self.blocks)
-        return x if self._estimate is None else torch.cat([x, torch.from_numpy(self._estimate(obs))], -1)
-
+    # ------------------------------------------------------------------ acting
     def q_values(self, obs: np.ndarray) -> np.ndarray:
-        """The online network's Q-values for one observation ``(m,)`` or a batch ``(k, m)``."""
-        with torch.no_grad():
-            return self.online(self._input(obs)).numpy()
+        """The online network's Q-values for one observation ``(size,)`` or a batch ``(k, size)``."""
+        return self.policy.q_values(obs)
 
     def new_episode(self, rng: np.random.Generator) -> DQNEpisode:
         """An episode whose exploration draws come from ``rng``."""
         return DQNEpisode(rng)
 
     def decide(self, obs: np.ndarray, episodes: Sequence[DQNEpisode], explore: bool = False) -> np.ndarray:
-        """``argmax Q`` of each observation (one forward pass), epsilon-greedy per episode if ``explore``;
-        with ``in_turn``, the rows one after the other (:func:`~evcd.agents.in_turn.learner_tick`)."""
-        keep = self._keep  # with switch_margin_s: an EV keeps its station within the margin
-        if self.config.in_turn:  # the fleet's EVs of one tick one after the other
-            choose = lambda j, greedy: self._choose(greedy, episodes[j], explore)  # noqa: E731
-            return learner_tick(obs, episodes, self._vehicle, self.q_values, choose, self._push, self.layout,
-                                keep)  # fmt: skip
-        greedy = greedy_stations(self.q_values(obs), np.asarray(obs)[:, : self.n_stations], episodes, keep)
-        pairs = zip(greedy, episodes, strict=True)
-        return np.array([self._choose(int(g), episode, explore) for g, episode in pairs], dtype=np.int64)
+        """``argmax Q`` of each observation (one forward pass), epsilon-greedy per episode if ``explore``."""
+        greedy = self.policy.greedy(obs)
+        if not explore:
+            return greedy.astype(np.int64)
+        c, eps = self.config, self.epsilon
+        return np.array([episode.choose(int(g), eps, self.n_stations, c.exploration)
+                         for g, episode in zip(greedy, episodes, strict=True)], dtype=np.int64)  # fmt: skip
 
-    def _choose(self, greedy: int, episode: DQNEpisode, explore: bool) -> int:
-        """The action given the greedy one (the exploration draws, from the episode's generator), kept as
-        the episode's station (where ``switch_margin_s`` and ``in_turn`` count it)."""
-        if explore:
-            greedy = episode.choose(greedy, self.epsilon, self.n_stations, self.config.exploration)
-        episode.station = int(greedy)
-        return episode.station
-
-    # ------------------------------------------------------------------ learning
+    # ------------------------------------------------------------------ storing
     def observe(self, transition: Transition, episode: DQNEpisode | None = None) -> None:
-        """Store the transition of ``episode`` (default: the current one); every ``train_freq``
-        transitions after ``learning_starts``, learn.
-
-        With ``n_step`` > 1 a transition is stored once the ``n - 1`` after it are known (or its
-        episode ended): its reward becomes the discounted sum of the (up to) ``n`` rewards, its
-        next observation the one ``n`` steps on, and its bootstrap is discounted by ``gamma ** n``.
-        With ``in_turn`` the transition's observation is the one the EV decided on, and its next
-        observation the one it decides on at its next tick (:func:`~evcd.agents.in_turn.hold`).
-        """
+        """Store the transition of ``episode`` (default: the current one) through its n-step window;
+        every ``train_freq`` transitions after ``learning_starts``, learn."""
         c = self.config
         ep = self.episode if episode is None else episode
-        if c.in_turn and ep.seen is not None:  # decided in turn: learn from what it decided on
-            hold(transition, ep, self._push)
-        else:
-            self._push(transition, ep)
+        for window in ep.windows(transition, c.n_step):
+            self._store(window)
         self.steps += 1
         if self.steps >= max(c.learning_starts, 1) and self.steps % c.train_freq == 0 and len(self.replay):
             for _ in range(c.gradient_steps):
@@ -282,19 +341,9 @@ class DQNAgent(Agent):
 
     def end_episode(self, episode: DQNEpisode | None = None) -> None:  # type: ignore[override]
         """``episode`` ended. After a last transition nothing is left to store; an episode that ended
-        without one (its target could no longer be observed) stores what it holds: with ``in_turn``
-        its transition waiting for a next decision (with the next observation it had), and its
-        pending n-step windows, each bootstrapping from the last true observation."""
-        ep = self.episode if episode is None else episode
-        if ep.held is not None:
-            held, ep.held = ep.held, None
-            self._push(held, ep)
-        for window in ep.flush():
-            self._store(window)
-
-    def _push(self, transition: Transition, episode: DQNEpisode) -> None:
-        """Into the replay, through ``episode``'s n-step window."""
-        for window in episode.windows(transition, self.config.n_step):
+        without one (its target could no longer be observed) stores its pending n-step windows, each
+        bootstrapping from the last true observation."""
+        for window in (self.episode if episode is None else episode).flush():
             self._store(window)
 
     def _store(self, window: Sequence[Transition]) -> None:
@@ -304,6 +353,7 @@ class DQNAgent(Agent):
         self.replay.add(first.obs, int(first.action), reward, last.next_obs, bool(last.terminated),
                         bool(last.truncated), discount=gamma ** len(window))  # fmt: skip
 
+    # ------------------------------------------------------------------ learning
     def td_targets(
         self, rewards: torch.Tensor, next_obs: torch.Tensor, terminated: torch.Tensor, discounts: torch.Tensor
     ) -> torch.Tensor:
@@ -311,9 +361,9 @@ class DQNAgent(Agent):
         transition of ``n`` rewards): ``a*`` from the online network if ``double``, else from the
         target network itself (the max)."""
         with torch.no_grad():
-            next_target = self.target(next_obs)
+            next_target = self.policy.target(next_obs)
             if self.double:
-                best = self.online(next_obs).argmax(dim=1, keepdim=True)
+                best = self.policy.online(next_obs).argmax(dim=1, keepdim=True)
                 next_value = next_target.gather(1, best).squeeze(1)
             else:
                 next_value = next_target.max(dim=1).values
@@ -321,25 +371,22 @@ class DQNAgent(Agent):
 
     def learn(self) -> float:
         """One gradient step on a prioritized batch; returns the loss."""
-        c = self.config
+        c, policy = self.config, self.policy
         batch = self.replay.sample(c.batch_size, self.learn_rng, self.beta)
-        obs = self._input(batch.obs)
-        next_obs = self._input(batch.next_obs)
+        obs, next_obs = policy.inputs(batch.obs), policy.inputs(batch.next_obs)
         actions = torch.from_numpy(batch.actions.astype(np.int64))
         rewards = torch.from_numpy(batch.rewards.astype(np.float32))
         terminated = torch.from_numpy(batch.terminated.astype(np.float32))
         weights = torch.from_numpy(batch.weights.astype(np.float32))
         discounts = torch.from_numpy(batch.discounts.astype(np.float32))
         target = self.td_targets(rewards, next_obs, terminated, discounts)
-        q = self.online(obs).gather(1, actions[:, None]).squeeze(1)
+        q = policy.online(obs).gather(1, actions[:, None]).squeeze(1)
         per_sample = (F.mse_loss if c.loss == "mse" else F.smooth_l1_loss)(q, target, reduction="none")
         loss = (weights * per_sample).mean()
         self.optimizer.zero_grad(set_to_none=True)
-        for group in self.optimizer.param_groups:
-            group["lr"] = self.learning_rate
         loss.backward()
         if c.max_grad_norm is not None:
-            nn.utils.clip_grad_norm_(self.online.parameters(), c.max_grad_norm)
+            nn.utils.clip_grad_norm_(policy.online.parameters(), c.max_grad_norm)
         self.optimizer.step()
         td = (q - target).detach().numpy().astype(np.float64)
         if not np.isfinite(td).all():
@@ -358,10 +405,7 @@ class DQNAgent(Agent):
 
     def update_target(self) -> None:
         """``target <- tau * online + (1 - tau) * target`` (a copy when ``tau = 1``)."""
-        tau = self.config.tau
-        with torch.no_grad():
-            for t, o in zip(self.target.parameters(), self.online.parameters(), strict=True):
-                t.copy_(o) if tau >= 1.0 else t.lerp_(o, tau)
+        self.policy.update_target(self.config.tau)
         self.target_updates += 1
 
     def stats(self) -> dict[str, float]:
@@ -374,7 +418,7 @@ class DQNAgent(Agent):
             "q_total": self.q_total,
             "epsilon": self.epsilon,
             "beta": self.beta,
-            "lr": self.learning_rate,
+            "lr": self.config.lr,
         }
 
     # ------------------------------------------------------------------ state
@@ -392,18 +436,11 @@ class DQNAgent(Agent):
         }
 
     def policy_state_dict(self) -> dict[str, Any]:
-        """The part of :meth:`state_dict` that ``load_state_dict(..., policy_only=True)`` reads: the
-        networks, their input scale and the settings it checks (no optimizer, no replay)."""
-        return {
-            "format": STATE_FORMAT,
-            "n_stations": self.n_stations,
-            "config": self._saved_config(),
-            "input_scale": torch.from_numpy(self.input_scale.copy()),
-            "online": copy.deepcopy(self.online.state_dict()),
-            "target": copy.deepcopy(self.target.state_dict()),
-        }
+        """The part of :meth:`state_dict` that decides (:meth:`QPolicy.state_dict
+        <evcd.agents.q_policy.QPolicy.state_dict>`), read by ``load_state_dict(..., policy_only=True)``."""
+        return self.policy.state_dict(self._settings())
 
-    def _saved_config(self) -> dict[str, Any]:
+    def _settings(self) -> dict[str, Any]:
         """The hyperparameters and switches as a checkpoint keeps them."""
         return {**asdict(self.config), "hidden": list(self.config.hidden), "double": self.double,
                 "dueling": self.dueling}  # fmt: skip
@@ -411,26 +448,16 @@ class DQNAgent(Agent):
     def load_state_dict(self, state: Mapping[str, Any], policy_only: bool = False) -> None:  # type: ignore[override]
         """Restore :meth:`state_dict` (``policy_only``: just the networks and their input scale).
 
-        The checkpoint's input scale replaces this agent's: the network keeps seeing what it was
-        trained on, whatever this environment's observation units.
-
         Raises:
             CheckpointError: the state is not a DQN agent's, or was made for another observation
-                size, number of stations, network or switch setting (the message names it).
+                size, number of stations or network (the message names it).
         """
-        mine = {key: self._saved_config()[key] for key in CHECKED_SETTINGS}
-        scale = check_policy_state(
-            state, self.input_scale, mine, f"layout {self.layout}: {self.blocks} x {self.n_stations} stations"
-        )
-        if not np.array_equal(scale, self.input_scale):
+        if self.policy.load_state_dict(state, self._settings()):
             log.info("the checkpoint's network reads observations at its own scale (trained with other "
                      "charging points or without scaling); using it")  # fmt: skip
-        self._set_input_scale(scale)
+        if policy_only:
+            return
         try:
-            self.online.load_state_dict(state["online"])
-            self.target.load_state_dict(state["target"])
-            if policy_only:
-                return
             # a copy: torch's Optimizer.load_state_dict keeps the given tensors (Adam's moments), which
             # the caller's state (or another agent loaded from it) would then share with this agent
             self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))

@@ -17,25 +17,17 @@ due after this one does not delay it. The central rule then counts an EV it assi
 the EVs after it only where it is due first (its drive time to the station, ``T`` where observed,
 else the queue-aware guess from ``D`` and ``N``, below theirs).
 
-Both take ``switch_margin_s`` (default 0: off): an EV already sent somewhere (or waiting in a car park)
-keeps that station unless another one is estimated to start its charge more than that many seconds
-sooner. EVs that count each other can move away from a station together and back together
-(docs/FLEET.md, "A first look"); the margin damps that oscillation.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
 
 import numpy as np
 
 from evcd.agents.base import EpisodeState
 from evcd.agents.heuristics import Observed, QueueAwareAgent
-from evcd.agents.in_turn import counted_at
-from evcd.agents.switching import keep_station
-from evcd.utils.validation import check_real
 
 
 @dataclass
@@ -46,8 +38,13 @@ class FleetRuleEpisode(EpisodeState):
     station: int | None = None
 
 
-#: The former name of :class:`FleetRuleEpisode` (the central rule's episode state).
-CentralEpisode = FleetRuleEpisode
+def counted_at(d: np.ndarray, episodes: Sequence[FleetRuleEpisode]) -> np.ndarray:
+    """Per EV (rows of ``d``), the station it is counted at as far as the dispatcher knows (-1:
+    unknown): where it waits (``D == 0``: in that station's ``Z``; ``D`` in any unit), else the
+    ``station`` its episode state says it was last sent to (``None``: unknown)."""
+    waiting = d == 0.0
+    last = np.array([-1 if e.station is None else e.station for e in episodes], dtype=np.int64)
+    return np.where(waiting.any(axis=1), np.argmax(waiting, axis=1), last)
 
 
 class ReservationAgent(QueueAwareAgent):
@@ -56,39 +53,23 @@ class ReservationAgent(QueueAwareAgent):
     For station ``i``: ``max(t, b)`` as in :class:`~evcd.agents.heuristics.QueueAwareAgent`, where the
     backlog ``b`` counts ``Z + H`` vehicles (those at the station plus the other guided EVs heading
     there) instead of ``Z``. Ties go to the lowest index. It needs the fleet's 4-block observation;
-    the constructor takes ``switch_margin_s`` (module docstring) and the arguments of
-    :class:`~evcd.agents.heuristics.QueueAwareAgent`.
+    the constructor takes the arguments of :class:`~evcd.agents.heuristics.QueueAwareAgent`.
     """
 
     name = "reservation"
     obs_blocks = (4,)
-    options: ClassVar[Mapping[str, Any]] = {**QueueAwareAgent.options, "switch_margin_s": 0.0}
-
-    def __init__(
-        self, n_stations: int, rng: np.random.Generator, switch_margin_s: float = 0.0, **kwargs: Any
-    ) -> None:
-        super().__init__(n_stations, rng, **kwargs)  # QueueAwareAgent's options
-        self.switch_margin_s = check_real("switch_margin_s", switch_margin_s, low=0.0)
 
     def new_episode(self, rng: np.random.Generator) -> FleetRuleEpisode:
         """A guided EV this agent has not decided yet."""
         return FleetRuleEpisode(rng)
 
-    def keep(self, scores: np.ndarray, current: int) -> int:
-        """The station of smallest score (ties: the lowest index), unless ``current`` (>= 0) is within
-        ``switch_margin_s`` of it (a margin of 0 never keeps: the plain rule)."""
-        return keep_station(scores, current, self.switch_margin_s)
-
     def decide(
         self, obs: np.ndarray, episodes: Sequence[FleetRuleEpisode], explore: bool = False
     ) -> np.ndarray:
-        """Per EV the station with the smallest :meth:`estimate`, damped by ``switch_margin_s``; each
-        EV's state records where it is sent."""
+        """Per EV the station with the smallest :meth:`estimate` (ties: the lowest index); each EV's
+        state records where it is sent."""
         batch = np.atleast_2d(np.asarray(obs))
-        scores = self.estimate(batch)
-        current = counted_at(self.read(batch)[0], episodes)
-        stations = np.array([self.keep(row, int(c)) for row, c in zip(scores, current, strict=True)],
-                            dtype=np.int64)  # fmt: skip
+        stations = self.estimate(batch).argmin(axis=-1).astype(np.int64)
         for episode, s in zip(episodes, stations, strict=True):
             episode.station = int(s)
         return stations if np.ndim(obs) > 1 else stations[0]
@@ -135,8 +116,7 @@ class CentralAgent(ReservationAgent):
 
     Where an EV was counted comes from its episode state (the station this agent sent it to at its
     previous decision, :class:`FleetRuleEpisode`) and, for an EV waiting in a car park, from its
-    observation (``D == 0`` there, and it is in that station's ``Z``). With ``switch_margin_s`` an EV
-    keeps that station unless another is better by more than the margin (:meth:`keep`).
+    observation (``D == 0`` there, and it is in that station's ``Z``).
 
     With ``G`` in the observation (module docstring) an EV counts ``Z + G`` ahead, and one assigned
     at the tick counts for a later one only where its drive time there is below the later one's; one
@@ -194,7 +174,7 @@ class CentralAgent(ReservationAgent):
             for st, when, sign in moves:
                 if when < due[j, st] or when == -np.inf:
                     moved[st] += sign
-            s = self.keep(self.score(d[j], n[j], ahead[j] + moved, **row), int(counted[j]))
+            s = int(np.argmin(self.score(d[j], n[j], ahead[j] + moved, **row)))
             stations[j] = s
             c = int(counted[j])
             if c != s:

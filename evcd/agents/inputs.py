@@ -1,12 +1,12 @@
 """What a network reads: an observation in physical units (m, vehicles) scaled to km, tens of
 vehicles and multiples of the charging points, whatever units the environment hands out.
 
-    divisors = observation_divisors(points, n_stations, blocks, normalized)   # env units -> physical
-    factor = input_factor(input_scale, divisors, normalized)                  # env units -> network
-    x = network_input(obs, factor, blocks)
+    inputs = InputScale(points, n_stations, "DNZ", normalized)    # km, tens of vehicles, points
+    x = inputs(obs)                                               # env units -> the network's input
 
-A learner keeps ``input_scale`` (physical -> network) with its networks in a checkpoint, so a loaded
-policy sees what it was trained on in any environment; the DQN and PPO learners share this.
+A learner keeps ``inputs.scale`` (physical -> network) with its networks in a checkpoint and restores it
+with :meth:`InputScale.set`, so a loaded policy sees what it was trained on in any environment; the DQN
+and PPO learners share this.
 """
 
 from __future__ import annotations
@@ -60,3 +60,42 @@ def network_input(obs: np.ndarray, factor: np.ndarray, blocks: int | str) -> tor
     if x.shape[-1:] != (len(factor),):
         raise ValueError(f"observation shape {x.shape}: expected (..., {len(factor)}), {blocks} x m")
     return torch.from_numpy(x * factor)
+
+
+class InputScale:
+    """An environment's observations -> a network's input: the physical reading (m, vehicles) times
+    ``scale``, which is km, tens of vehicles and multiples of the charging points for ``points``, or
+    ones for ``points=None`` (an observation taken as given).
+
+    Args:
+        points: the stations' charging points (one number for all), or ``None``.
+        n_stations: stations ``m``.
+        layout: the observation's blocks (3, 4 or letters, :func:`~evcd.env.observation.check_layout`).
+        normalized: whether the environment normalises its observations (needs ``points``).
+
+    Raises:
+        ValueError: see :func:`observation_divisors`.
+    """
+
+    def __init__(
+        self, points: int | Sequence[int] | None, n_stations: int, layout: int | str, normalized: bool
+    ) -> None:
+        self.layout = check_layout(layout)
+        self.normalized = bool(normalized)
+        self.divisors = observation_divisors(points, n_stations, self.layout, self.normalized)
+        self.size = len(self.divisors)
+        self.set(np.ones(self.size) if points is None else 1.0 / self.divisors)
+
+    def set(self, scale: np.ndarray) -> None:
+        """Take ``scale`` (physical -> network, e.g. a checkpoint's) and derive the factor applied to
+        observations."""
+        self.scale = np.asarray(scale, np.float32)
+        self._factor = input_factor(self.scale, self.divisors, self.normalized)
+
+    def __call__(self, obs: np.ndarray) -> torch.Tensor:
+        """The network's input for one observation or a batch (float32).
+
+        Raises:
+            ValueError: the last axis is not the layout's size.
+        """
+        return network_input(obs, self._factor, len(self.layout))

@@ -45,7 +45,7 @@ from evcd.agents.base import (
     observation_letters,
     observation_units,
 )
-from evcd.agents.inputs import input_factor, network_input, observation_divisors
+from evcd.agents.inputs import InputScale
 from evcd.agents.networks import make_q_network
 from evcd.agents.ppo_config import PPOConfig
 from evcd.agents.ppo_loss import gae, ppo_loss
@@ -111,11 +111,8 @@ class PPOAgent(Agent):
         del checkpoint
         self.config = with_overrides("PPOAgent", PPOConfig, config, hyperparameters)
         self.layout = layout_option(obs_blocks)
-        self.blocks = len(self.layout)
-        self.obs_dim = self.blocks * self.n_stations
-        self.normalized = check_bool("normalized", normalized)
-        self._divisors = observation_divisors(points, self.n_stations, self.layout, self.normalized)
-        self._set_input_scale(np.ones(self.obs_dim) if points is None else 1.0 / self._divisors)
+        self.inputs = InputScale(points, self.n_stations, self.layout, check_bool("normalized", normalized))
+        self.obs_dim = self.inputs.size
         c = self.config
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(int(rng.integers(2**63 - 1)))
@@ -152,23 +149,16 @@ class PPOAgent(Agent):
             raise CheckpointError("the checkpoint does not hold a PPO agent")
         return {"hidden": tuple(policy["config"]["hidden"]), "network": str(policy["config"]["network"])}
 
-    def _set_input_scale(self, scale: np.ndarray) -> None:
-        self.input_scale = np.asarray(scale, np.float32)
-        self._obs_to_input = input_factor(self.input_scale, self._divisors, self.normalized)
-
     def __repr__(self) -> str:
         c = self.config
         return (f"PPOAgent({c.network} {list(c.hidden)}, lr={c.lr:g}, rollout={c.rollout_steps}, "
                 f"epochs={c.epochs}, minibatch={c.minibatch_size}, clip={c.clip:g})")  # fmt: skip
 
     # ------------------------------------------------------------------ acting
-    def _input(self, obs: np.ndarray) -> torch.Tensor:
-        return network_input(obs, self._obs_to_input, self.blocks)
-
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
         """The policy's station probabilities for one observation or a batch."""
         with torch.no_grad():
-            return torch.softmax(self.actor(self._input(obs)), dim=-1).double().numpy()
+            return torch.softmax(self.actor(self.inputs(obs)), dim=-1).double().numpy()
 
     def new_episode(self, rng: np.random.Generator) -> PPOEpisode:
         """An episode whose draws come from ``rng``."""
@@ -183,7 +173,7 @@ class PPOAgent(Agent):
                 f"observations of shape {batch.shape} for {len(episodes)} episodes: one row each"
             )
         with torch.no_grad():
-            x = self._input(batch)
+            x = self.inputs(batch)
             logits = self.actor(x)
             logp_all = torch.log_softmax(logits, dim=-1).double().numpy()
             values = self.critic(x).squeeze(-1).double().numpy() if explore else None
@@ -222,7 +212,7 @@ class PPOAgent(Agent):
             bootstrap = 0.0
             if not ep.terminated:
                 with torch.no_grad():
-                    bootstrap = float(self.critic(self._input(ep.last_next_obs[None])).squeeze())  # type: ignore[index]
+                    bootstrap = float(self.critic(self.inputs(ep.last_next_obs[None])).squeeze())  # type: ignore[index]
             advantages, returns = gae(np.array(ep.rewards), np.array(ep.values[:n]), bootstrap, c.gamma,
                                       c.gae_lambda)  # fmt: skip
             self.rollout["obs"] += ep.obs[:n]
@@ -239,7 +229,7 @@ class PPOAgent(Agent):
         """``epochs`` passes of minibatch gradient steps on the rollout, which is then emptied;
         returns the means of the losses, the KL estimate and the clipped share."""
         c = self.config
-        obs = self._input(np.stack(self.rollout["obs"]))
+        obs = self.inputs(np.stack(self.rollout["obs"]))
         actions = torch.tensor(self.rollout["actions"], dtype=torch.int64)
         old_logp = torch.tensor(self.rollout["logp"], dtype=torch.float32)
         advantages = torch.tensor(self.rollout["advantages"], dtype=torch.float32)
@@ -303,7 +293,7 @@ class PPOAgent(Agent):
             "n_stations": self.n_stations,
             "obs_dim": self.obs_dim,
             "config": config,
-            "input_scale": torch.from_numpy(self.input_scale.copy()),
+            "input_scale": torch.from_numpy(self.inputs.scale.copy()),
             "actor": copy.deepcopy(self.actor.state_dict()),
             "critic": copy.deepcopy(self.critic.state_dict()),
         }
@@ -351,7 +341,7 @@ class PPOAgent(Agent):
             self.critic.load_state_dict(state["critic"])
         except (RuntimeError, KeyError) as exc:
             raise CheckpointError(f"the checkpoint does not fit this agent: {exc}") from exc
-        self._set_input_scale(to_numpy(state["input_scale"]))
+        self.inputs.set(to_numpy(state["input_scale"]))
         if policy_only:
             return
         self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))

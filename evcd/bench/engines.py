@@ -22,7 +22,7 @@ import numpy as np
 
 from evcd.agents import make_agent_for_env
 from evcd.agents.base import Agent
-from evcd.agents.dqn_config import DQNConfig
+from evcd.agents.dqn import DQNConfig
 from evcd.agents.heuristics import FixedStationAgent
 from evcd.env import ChargingNavEnv
 from evcd.env.runners import BatchedRunner, EpisodeRow, EpisodeRunner, SingleEnvRunner

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from evcd.agents import make_agent_for_env
-from evcd.agents.dqn_config import DQNConfig
+from evcd.agents.dqn import DQNConfig
 from evcd.agents.heuristics import GreedyAgent
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners.fleet import FleetRunner

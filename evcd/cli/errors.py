@@ -1,9 +1,11 @@
-"""How a script ends a run on a bad setting (:func:`stop_on_bad_setting`)."""
+"""How a script ends a run on a bad setting (:func:`stop_on_bad_setting`, and before Hydra composes,
+:func:`refuse_removed_settings`)."""
 
 from __future__ import annotations
 
 import logging
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
@@ -12,6 +14,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from evcd.cli.run_record import RECORD_DIR, discard_refused_run_dir, process_start, write_run_record
+from evcd.utils.removed import check_overrides
 
 
 def stop_on_bad_setting(
@@ -42,3 +45,14 @@ def stop_on_bad_setting(
         logging.shutdown()  # close the log file before its directory goes
         discard_refused_run_dir(run_dir, process_start())
     sys.exit(2)
+
+
+def refuse_removed_settings(argv: Sequence[str], log: logging.Logger) -> None:
+    """Before Hydra composes a script's config: a command line that sets a setting which has left evcd
+    (:mod:`evcd.utils.removed`) ends with exit code 2 and one line naming it and the last commit that
+    has it (Hydra would refuse the unknown key with a longer story and no commit)."""
+    try:
+        check_overrides([arg for arg in argv if not arg.startswith("-")])
+    except ValueError as exc:
+        log.error("%s", exc)
+        sys.exit(2)

@@ -11,14 +11,14 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class
-from evcd.agents.dqn_config import DQNConfig
+from evcd.agents.dqn import DQNConfig
 from evcd.loops.hindsight import HindsightBound, check_dispatcher, dispatcher_learns
 
 
 def agent_params(cfg: DictConfig) -> tuple[str, dict[str, Any]]:
     """The dispatcher's name and constructor arguments from ``agent``; a learner that takes the
     ``learner`` block (:attr:`~evcd.agents.Agent.learner_block`: the DQN learners) also gets ``config``,
-    the :class:`~evcd.agents.dqn_config.DQNConfig` of the top-level ``learner`` block.
+    the :class:`~evcd.agents.dqn.DQNConfig` of the top-level ``learner`` block.
 
     Raises:
         ValueError: the name is unknown (the message lists the known ones), or a learner value is out
@@ -33,7 +33,7 @@ def agent_params(cfg: DictConfig) -> tuple[str, dict[str, Any]]:
 
 
 def learner_config(learner: DictConfig) -> DQNConfig:
-    """The :class:`~evcd.agents.dqn_config.DQNConfig` of a composed ``learner`` block (its schema).
+    """The :class:`~evcd.agents.dqn.DQNConfig` of a composed ``learner`` block (its schema).
 
     Raises:
         ValueError: a value out of range (the message names it).

@@ -2,7 +2,7 @@
 
     register_configs(conf_dir)      # before @hydra.main composes (the scripts call it at import)
 
-- group ``learner``, option ``defaults``: :class:`~evcd.agents.dqn_config.DQNConfig` with its own
+- group ``learner``, option ``defaults``: :class:`~evcd.agents.dqn.DQNConfig` with its own
   defaults. ``conf/train.yaml`` selects it; the presets ``conf/learner/*.yaml`` (``peak``, ``paper``)
   extend it and set only what they change, and the experiments pick a preset. A ``learner.*`` key
   that is not a field of ``DQNConfig``, or a value of the wrong type, is refused when Hydra composes.
@@ -22,7 +22,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import OmegaConf
 
 from evcd.agents import agent_class, agent_defaults, agent_names
-from evcd.agents.dqn_config import DQNConfig
+from evcd.agents.dqn import DQNConfig
 
 #: The ConfigStore option holding DQNConfig's defaults (group ``learner``).
 LEARNER_DEFAULTS = "defaults"

@@ -151,8 +151,6 @@ def train_episodes(
     state.sessions += 1
     saved = state.episodes_done  # the position of the checkpoint this session started from
     tlog.start(agent.stats())
-    if validator is not None and settings.validation.due_at_start(state.episodes_done, state.validation):
-        _validate(agent, validator, settings, run_dir, state, tlog)
     played = runner()
     try:
         t0 = time.perf_counter()

@@ -26,6 +26,7 @@ from evcd.loops.run_files import CHECKPOINTS, OUTPUTS, RESULTS_JSON, TENSORBOARD
 from evcd.loops.train_log import TrainLog
 from evcd.loops.validation import ValidationRecord
 from evcd.utils.checkpoint import CheckpointError, has_checkpoint, load_checkpoint, save_checkpoint
+from evcd.utils.removed import drop_removed
 
 log = logging.getLogger(__name__)
 
@@ -237,7 +238,8 @@ def restore_training(
 
     Raises:
         CheckpointError: not a checkpoint of ``state_cls``'s trainer (its ``FORMAT``), or damaged.
-        ValueError: ``config`` differs from the checkpoint's run (the message names each difference).
+        ValueError: ``config`` differs from the checkpoint's run (the message names each difference),
+            or that run used a setting which has left evcd (:mod:`evcd.utils.removed`).
     """
     payload = load_checkpoint(run_dir / CHECKPOINTS)
     expected = state_cls.FORMAT
@@ -246,7 +248,7 @@ def restore_training(
                               f"{payload.get('format')!r}, expected {expected!r})")  # fmt: skip
     saved = payload.get("config")
     if config is not None and saved is not None:
-        diff = config_diff(saved, config)
+        diff = config_diff(drop_removed(saved), config)
         if diff:
             raise ValueError(
                 "resume=true with settings that differ from the checkpoint's run (a resumed run "

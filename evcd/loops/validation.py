@@ -45,37 +45,25 @@ class ValidationSettings:
         episodes: validation episodes.
         select_best: evaluate the policy of the best validation (fewest truncated validation
             episodes, then the lowest mean travel time; the earliest on a tie) instead of the last.
-        at_start: also validate the policy before its first training episode (the untrained
-            network, a point after 0 episodes): with ``select_best`` the run evaluates the start where
-            training never beat it on the tuning days (a learner with ``rule_prior`` starts as its
-            rule, :mod:`evcd.agents.rule_prior`).
     """
 
     every: int = 0
     episodes: int = 30
     select_best: bool = False
-    at_start: bool = False
 
     def __post_init__(self) -> None:
         check_int("train.validation.every", self.every, minimum=0)
         check_int("train.validation.episodes", self.episodes, minimum=1)
-        for name in ("select_best", "at_start"):
-            value = getattr(self, name)
-            if not isinstance(value, bool):
-                raise ValueError(f"train.validation.{name}={value!r}: must be true or false")
-            if value and not self.every:
-                raise ValueError(f"train.validation.{name}=true needs a validation to select by or to "
-                                 "start: set train.validation.every > 0")  # fmt: skip
+        if not isinstance(self.select_best, bool):
+            raise ValueError(f"train.validation.select_best={self.select_best!r}: must be true or false")
+        if self.select_best and not self.every:
+            raise ValueError("train.validation.select_best=true needs a validation to select by: set "
+                             "train.validation.every > 0")  # fmt: skip
 
     def due(self, episodes_done: int, total: int) -> bool:
         """Whether a validation follows ``episodes_done`` of ``total`` training episodes (and always
         the last), for either task's trainer."""
         return self.every > 0 and (episodes_done % self.every == 0 or episodes_done == total)
-
-    def due_at_start(self, episodes_done: int, record: ValidationRecord) -> bool:
-        """Whether the policy is validated before training (``at_start``, a run that has not trained
-        and has no validation yet: a resumed run keeps the point it saved)."""
-        return self.at_start and episodes_done == 0 and not record.points
 
 
 @dataclass

@@ -1,5 +1,5 @@
 """Equality of agent states, and the options of a saved DQN policy, for the learners' checkpoint tests
-(shared by test_dqn, test_in_turn and test_ppo)."""
+(shared by test_dqn and test_ppo)."""
 
 from __future__ import annotations
 

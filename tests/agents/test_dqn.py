@@ -17,10 +17,9 @@ import torch
 
 from evcd.agents import make_agent, make_agent_for_env
 from evcd.agents.base import Transition
-from evcd.agents.dqn import DQNAgent, DQNEpisode
-from evcd.agents.dqn_config import DQNConfig, linear_schedule
-from evcd.agents.dqn_state import STATE_FORMAT
+from evcd.agents.dqn import DQNAgent, DQNConfig, DQNEpisode, linear_schedule
 from evcd.agents.networks import DuelingQNetwork, QNetwork
+from evcd.agents.q_policy import STATE_FORMAT
 from evcd.env.observation import unit_divisors
 from evcd.env.runners import SingleEnvRunner
 from evcd.loops.seeds import TRAIN_STREAM, episode_specs
@@ -114,10 +113,10 @@ def test_registry_names_imply_the_switches():
     assert type(ddqn) is DQNAgent
     assert (dqn.double, dqn.dueling) == (False, False)
     assert (ddqn.double, ddqn.dueling) == (True, True)
-    assert type(dqn.online) is QNetwork
-    assert type(dqn.target) is QNetwork
-    assert type(ddqn.online) is DuelingQNetwork
-    assert type(ddqn.target) is DuelingQNetwork
+    assert type(dqn.policy.online) is QNetwork
+    assert type(dqn.policy.target) is QNetwork
+    assert type(ddqn.policy.online) is DuelingQNetwork
+    assert type(ddqn.policy.target) is DuelingQNetwork
     assert dqn.name == "dqn"
     assert ddqn.name == "dueling_ddqn"
     assert dqn.learns
@@ -134,10 +133,10 @@ def test_make_agent_rejects_unknown_options():
 
 def test_target_network_starts_as_a_frozen_copy():
     agent = _agent()
-    assert _equal(_params(agent.online), _params(agent.target))
-    assert all(not p.requires_grad for p in agent.target.parameters())
-    assert all(p.requires_grad for p in agent.online.parameters())
-    assert agent.online is not agent.target
+    assert _equal(_params(agent.policy.online), _params(agent.policy.target))
+    assert all(not p.requires_grad for p in agent.policy.target.parameters())
+    assert all(p.requires_grad for p in agent.policy.online.parameters())
+    assert agent.policy.online is not agent.policy.target
 
 
 # -- TD targets -----------------------------------------------------------------------------------------
@@ -160,10 +159,10 @@ def _batch(seed: int, n: int = 16):
 @pytest.mark.parametrize("dueling", [False, True])
 def test_double_target_by_hand(dueling):
     agent = _agent(double=True, dueling=dueling, hidden=(8, 8), gamma=0.9)
-    _perturb(agent.target, seed=1)
+    _perturb(agent.policy.target, seed=1)
     rewards, next_obs, terminated = _batch(2)
     with torch.no_grad():
-        q_online, q_target = agent.online(next_obs), agent.target(next_obs)
+        q_online, q_target = agent.policy.online(next_obs), agent.policy.target(next_obs)
     best = q_online.argmax(dim=1)
     expected = rewards + 0.9 * (1 - terminated) * q_target[torch.arange(16), best]
     torch.testing.assert_close(
@@ -176,10 +175,10 @@ def test_double_target_by_hand(dueling):
 @pytest.mark.parametrize("dueling", [False, True])
 def test_plain_target_is_the_max_of_the_target_network(dueling):
     agent = _agent(double=False, dueling=dueling, hidden=(8, 8), gamma=0.8)
-    _perturb(agent.target, seed=3)
+    _perturb(agent.policy.target, seed=3)
     rewards, next_obs, terminated = _batch(4)
     with torch.no_grad():
-        q_target, q_online = agent.target(next_obs), agent.online(next_obs)
+        q_target, q_online = agent.policy.target(next_obs), agent.policy.online(next_obs)
     expected = rewards + 0.8 * (1 - terminated) * q_target.max(dim=1).values
     got = agent.td_targets(rewards, next_obs, terminated, _discounts(agent, rewards))
     torch.testing.assert_close(got, expected)
@@ -193,12 +192,12 @@ def test_double_and_plain_targets_differ_when_the_argmaxes_disagree(dueling):
     plain = _agent(seed=5, double=False, dueling=dueling, hidden=(8,), gamma=0.5)
     double = _agent(seed=5, double=True, dueling=dueling, hidden=(8,), gamma=0.5)
     for agent in (plain, double):
-        _set_head_bias(agent.online, [1.0, 0.0, 0.0])
-        _set_head_bias(agent.target, [0.0, 5.0, 2.0])
+        _set_head_bias(agent.policy.online, [1.0, 0.0, 0.0])
+        _set_head_bias(agent.policy.target, [0.0, 5.0, 2.0])
     rewards, next_obs, terminated = _batch(6)
     with torch.no_grad():
-        q_target = double.target(next_obs)
-        q_online = double.online(next_obs)
+        q_target = double.policy.target(next_obs)
+        q_online = double.policy.online(next_obs)
     assert (q_online.argmax(dim=1) == 0).all()
     assert (q_target.argmax(dim=1) == 1).all()
     t_plain = plain.td_targets(rewards, next_obs, terminated, _discounts(plain, rewards))
@@ -223,8 +222,8 @@ def test_only_termination_cuts_the_bootstrap(double, terminated, truncated, boot
         seed=7, double=double, batch_size=1, buffer_size=4, learning_starts=10**6, gamma=0.7,
         reward_scale=0.5, max_grad_norm=None,
     )  # fmt: skip
-    _set_head_bias(agent.target, [2.0, 9.0, 4.0])  # Q_target(s', .) is known whatever s'
-    _set_head_bias(agent.online, [0.5, 0.0, 3.0])  # and Q_online(s', .) too: argmax 2
+    _set_head_bias(agent.policy.target, [2.0, 9.0, 4.0])  # Q_target(s', .) is known whatever s'
+    _set_head_bias(agent.policy.online, [0.5, 0.0, 3.0])  # and Q_online(s', .) too: argmax 2
     rng = np.random.default_rng(8)
     t = Transition(_obs(rng), 1, 3.0, _obs(rng), terminated, truncated)
     agent.observe(t)
@@ -322,11 +321,11 @@ def test_an_episode_ended_without_a_last_transition_stores_its_windows_from_true
 
 def test_n_step_target_bootstraps_at_gamma_to_the_n():
     agent = _agent(n_step=3, gamma=0.5, learning_starts=10**6, hidden=(8,))
-    _set_head_bias(agent.target, [2.0, 9.0, 4.0])  # max Q_target(s', .) = 9 whatever s'
+    _set_head_bias(agent.policy.target, [2.0, 9.0, 4.0])  # max Q_target(s', .) = 9 whatever s'
     for t in _chain(0, [1.0, 1.0, 1.0, 1.0], None):
         agent.observe(t)
     batch = agent.replay.sample(2, np.random.default_rng(0), 1.0)
-    targets = agent.td_targets(torch.from_numpy(batch.rewards), agent._input(batch.next_obs),
+    targets = agent.td_targets(torch.from_numpy(batch.rewards), agent.policy.inputs(batch.next_obs),
                                torch.from_numpy(batch.terminated.astype(np.float32)),
                                torch.from_numpy(batch.discounts))  # fmt: skip
     torch.testing.assert_close(targets, torch.full((2,), 1.75 + 0.125 * 9.0))
@@ -514,11 +513,11 @@ def test_a_new_episode_state_is_explicit():
 def test_observations_are_scaled_before_the_network():
     scale = np.array([1e-3] * M + [0.1] * M + [0.5, 1.0, 0.25], dtype=np.float32)
     agent = _agent(points=[2, 1, 4])
-    np.testing.assert_array_equal(agent.input_scale, scale)
+    np.testing.assert_array_equal(agent.policy.inputs.scale, scale)
     obs = np.random.default_rng(20).uniform(0, 3000, size=(10, OBS_DIM)).astype(np.float32)
     with torch.no_grad():
-        expected = agent.online(torch.from_numpy(obs * scale)).numpy()
-        unscaled = agent.online(torch.from_numpy(obs)).numpy()
+        expected = agent.policy.online(torch.from_numpy(obs * scale)).numpy()
+        unscaled = agent.policy.online(torch.from_numpy(obs)).numpy()
     np.testing.assert_allclose(agent.q_values(obs), expected, rtol=1e-6)
     np.testing.assert_allclose(agent.q_values(obs[0]), expected[0], rtol=1e-6)
     assert not np.allclose(expected, unscaled)
@@ -535,7 +534,8 @@ def test_the_network_sees_the_same_input_on_raw_and_normalised_observations():
                               action_space=SimpleNamespace(n=3))  # fmt: skip
         env.unwrapped = env
         agents[normalized] = make_agent_for_env("dqn", env, np.random.default_rng(0), hidden=[4])
-        np.testing.assert_allclose(agents[normalized].input_scale, 1 / unit_divisors([2, 1, 4]), rtol=1e-7)
+        scale = agents[normalized].policy.inputs.scale
+        np.testing.assert_allclose(scale, 1 / unit_divisors([2, 1, 4]), rtol=1e-7)
     raw = np.random.default_rng(21).uniform(0, 3000, size=(10, OBS_DIM)).astype(np.float32)
     normalised = (raw / unit_divisors([2, 1, 4])).astype(np.float32)
     np.testing.assert_allclose(agents[True].q_values(normalised), agents[False].q_values(raw), rtol=1e-5)
@@ -563,15 +563,15 @@ def test_wrong_observation_shape_raises(obs):
 
 def test_no_gradient_step_before_learning_starts():
     agent = _agent(learning_starts=20, batch_size=4)
-    start = _params(agent.online)
+    start = _params(agent.policy.online)
     for i, t in enumerate(_transitions(0, 25), start=1):
         agent.observe(t)
         if i < 20:
             assert agent.gradient_steps == 0
-            assert _equal(_params(agent.online), start)
+            assert _equal(_params(agent.policy.online), start)
         else:
             assert agent.gradient_steps == i - 19
-    assert not _equal(_params(agent.online), start)
+    assert not _equal(_params(agent.policy.online), start)
     assert agent.stats()["transitions"] == 25.0
     assert agent.stats()["gradient_steps"] == 6.0
 
@@ -592,14 +592,14 @@ def test_gradient_steps_every_train_freq_transitions(train_freq, gradient_steps)
 
 def test_hard_target_update_every_target_update_gradient_steps():
     agent = _agent(learning_starts=4, batch_size=4, target_update=5, tau=1.0)
-    copied = _params(agent.online)
-    assert _equal(_params(agent.target), copied)
+    copied = _params(agent.policy.online)
+    assert _equal(_params(agent.policy.target), copied)
     checked = 0
     for t in _transitions(2, 40):
         before = agent.gradient_steps
         agent.observe(t)
         assert agent.gradient_steps == before + (agent.steps >= 4)
-        online, target = _params(agent.online), _params(agent.target)
+        online, target = _params(agent.policy.online), _params(agent.policy.target)
         assert agent.target_updates == agent.gradient_steps // 5
         assert agent.stats()["target_updates"] == agent.gradient_steps // 5
         if agent.gradient_steps and agent.gradient_steps % 5 == 0:
@@ -613,48 +613,31 @@ def test_hard_target_update_every_target_update_gradient_steps():
     assert checked == 7  # 37 gradient steps
 
 
-def test_learning_rate_is_constant_without_lr_end():
+def test_the_learning_rate_is_constant():
     agent = _agent(lr=3e-3, learning_starts=1, buffer_size=64, batch_size=4)
     for t in _transitions(1, 40):
         agent.observe(t)
     assert agent.gradient_steps > 30
-    assert agent.learning_rate == 3e-3
+    assert agent.stats()["lr"] == 3e-3
     assert [g["lr"] for g in agent.optimizer.param_groups] == [3e-3]
-
-
-def test_learning_rate_moves_linearly_to_lr_end_then_stays():
-    """The step after k gradient steps uses lr + (lr_end - lr) * k / lr_decay_steps (by hand), and
-    lr_end once the schedule is over; the optimizer really steps with it."""
-    agent = _agent(lr=1e-2, lr_end=1e-3, lr_decay_steps=10, learning_starts=1, buffer_size=64, batch_size=4)
-    seen = []
-    for t in _transitions(1, 30):
-        before = agent.gradient_steps
-        expected = 1e-2 + (1e-3 - 1e-2) * min(before, 10) / 10
-        assert agent.learning_rate == pytest.approx(expected)
-        agent.observe(t)
-        if agent.gradient_steps > before:
-            seen.append(agent.optimizer.param_groups[0]["lr"])
-            assert seen[-1] == pytest.approx(expected)
-    assert seen[0] == pytest.approx(1e-2) and seen[-1] == pytest.approx(1e-3)
-    assert agent.stats()["lr"] == pytest.approx(1e-3)
 
 
 def test_soft_update_moves_the_target_by_lerp():
     agent = _agent(tau=0.3)
-    _perturb(agent.target, seed=21)
-    old, online = _params(agent.target), _params(agent.online)
+    _perturb(agent.policy.target, seed=21)
+    old, online = _params(agent.policy.target), _params(agent.policy.online)
     agent.update_target()
-    for t, o, n in zip(old, online, _params(agent.target), strict=True):
+    for t, o, n in zip(old, online, _params(agent.policy.target), strict=True):
         torch.testing.assert_close(n, t + 0.3 * (o - t))
     assert agent.target_updates == 1
     # through learning: target_update=1 lerps after every gradient step, towards the updated online
     agent = _agent(tau=0.25, learning_starts=10**6, target_update=1)
-    _perturb(agent.target, seed=22)
+    _perturb(agent.policy.target, seed=22)
     for t in _transitions(3, 10):
         agent.observe(t)
-    old = _params(agent.target)
+    old = _params(agent.policy.target)
     agent.learn()
-    for t, o, n in zip(old, _params(agent.online), _params(agent.target), strict=True):
+    for t, o, n in zip(old, _params(agent.policy.online), _params(agent.policy.target), strict=True):
         torch.testing.assert_close(n, t + 0.25 * (o - t))
     assert agent.target_updates == 1
 
@@ -663,12 +646,12 @@ def _expected_q_y(agent: DQNAgent, batch) -> tuple[torch.Tensor, torch.Tensor]:
     """``Q(s, a)`` and the target ``y`` for a replay batch, by hand (before the gradient step)."""
     c = agent.config
     rows = torch.arange(len(batch.actions))
-    obs = torch.from_numpy(batch.obs * agent.input_scale)
-    next_obs = torch.from_numpy(batch.next_obs * agent.input_scale)
+    obs = torch.from_numpy(batch.obs * agent.policy.inputs.scale)
+    next_obs = torch.from_numpy(batch.next_obs * agent.policy.inputs.scale)
     with torch.no_grad():
-        q = agent.online(obs)[rows, torch.from_numpy(batch.actions)]
-        q_next = agent.target(next_obs)
-        best = agent.online(next_obs).argmax(dim=1) if agent.double else q_next.argmax(dim=1)
+        q = agent.policy.online(obs)[rows, torch.from_numpy(batch.actions)]
+        q_next = agent.policy.target(next_obs)
+        best = agent.policy.online(next_obs).argmax(dim=1) if agent.double else q_next.argmax(dim=1)
         boot = q_next[rows, best]
     live = 1 - torch.from_numpy(batch.terminated).float()
     return q, torch.from_numpy(batch.rewards) + c.gamma * live * boot
@@ -684,7 +667,7 @@ def test_priorities_follow_the_td_errors(double):
     """Eight transitions at equal priority and a batch of eight: the stratified draw takes each slot
     once, so every priority becomes ``(|td| + eps) ** alpha`` of its TD error."""
     agent = _agent(double=double, batch_size=8, learning_starts=10**6, alpha=0.6, priority_eps=1e-3)
-    _perturb(agent.target, seed=23)
+    _perturb(agent.policy.target, seed=23)
     for t in _transitions(4, 8):
         agent.observe(t)
     slots = np.arange(8)
@@ -718,7 +701,7 @@ def test_loss_is_the_importance_weighted_mean_by_hand(loss, double):
     it draws; ``l`` is the square (MSE) or Huber (quadratic below 1, linear above)."""
     agent = _agent(double=double, loss=loss, batch_size=16, learning_starts=10**6, alpha=0.7,
                    beta_start=0.3, beta_steps=100, points=[1, 2, 4])  # fmt: skip
-    _perturb(agent.target, seed=24, scale=0.05)
+    _perturb(agent.policy.target, seed=24, scale=0.05)
     for t in _transitions(6, 40):
         agent.observe(t)
     rng = np.random.default_rng(25)
@@ -749,18 +732,18 @@ def test_importance_weights_scale_the_gradient():
     agent.replay.update_priorities(np.arange(30), np.random.default_rng(26).uniform(0.01, 5.0, 30))
     batch = agent.replay.sample(16, copy.deepcopy(agent.learn_rng), agent.beta)
     _, y = _expected_q_y(agent, batch)
-    shadow = copy.deepcopy(agent.online)
-    obs = torch.from_numpy(batch.obs * agent.input_scale)
+    shadow = copy.deepcopy(agent.policy.online)
+    obs = torch.from_numpy(batch.obs * agent.policy.inputs.scale)
     q = shadow(obs)[torch.arange(16), torch.from_numpy(batch.actions)]
     w = torch.from_numpy(batch.weights)
     assert w.min() < 0.5
     (w * (q - y) ** 2).mean().backward()
-    unweighted = copy.deepcopy(agent.online)
+    unweighted = copy.deepcopy(agent.policy.online)
     q2 = unweighted(obs)[torch.arange(16), torch.from_numpy(batch.actions)]
     ((q2 - y) ** 2).mean().backward()
     grads = []
     agent.optimizer.register_step_pre_hook(
-        lambda *_: grads.append([p.grad.clone() for p in agent.online.parameters()])
+        lambda *_: grads.append([p.grad.clone() for p in agent.policy.online.parameters()])
     )
     agent.learn()
     assert len(grads) == 1
@@ -784,7 +767,7 @@ def test_gradient_clipping_bounds_the_norm():
             agent.observe(t._replace(reward=t.reward * 100))  # big TD errors, big gradients
         grads = []
         agent.optimizer.register_step_pre_hook(
-            lambda *_, a=agent, g=grads: g.append([p.grad.clone() for p in a.online.parameters()])
+            lambda *_, a=agent, g=grads: g.append([p.grad.clone() for p in a.policy.online.parameters()])
         )
         agent.learn()
         recorded[clip] = grads[0]
@@ -810,11 +793,11 @@ def test_learning_changes_only_the_online_network_between_target_updates():
     agent = _agent(learning_starts=10**6, target_update=1000)
     for t in _transitions(9, 20):
         agent.observe(t)
-    online, target = _params(agent.online), _params(agent.target)
+    online, target = _params(agent.policy.online), _params(agent.policy.target)
     losses = [agent.learn() for _ in range(5)]
     assert all(np.isfinite(losses))
-    assert not _equal(_params(agent.online), online)
-    assert _equal(_params(agent.target), target)
+    assert not _equal(_params(agent.policy.online), online)
+    assert _equal(_params(agent.policy.target), target)
     stats = agent.stats()
     assert stats["gradient_steps"] == 5.0
     assert stats["loss_total"] == pytest.approx(sum(losses))
@@ -845,9 +828,6 @@ def test_learning_changes_only_the_online_network_between_target_updates():
         ({"loss": "l1"}, "loss='l1'"),
         ({"exploration": "bogus"}, "exploration='bogus'"),
         ({"network": "lstm"}, "network='lstm'"),
-        ({"lr_end": 0.0}, "lr_end=0.0"),
-        ({"lr_end": -1e-4}, "lr_end=-0.0001"),
-        ({"lr_decay_steps": -1}, "lr_decay_steps=-1"),
         ({"target_update": 0}, "target_update=0"),
         ({"n_step": 0}, "n_step=0"),
         ({"train_freq": 0}, "train_freq=0"),
@@ -887,7 +867,7 @@ def test_bad_constructor_arguments():
 def test_default_settings_are_valid():
     agent = DQNAgent(M, np.random.default_rng(0))
     assert agent.config == DQNConfig()
-    np.testing.assert_array_equal(agent.input_scale, np.ones(OBS_DIM, np.float32))
+    np.testing.assert_array_equal(agent.policy.inputs.scale, np.ones(OBS_DIM, np.float32))
     config = DQNConfig(lr=5e-4, gamma=0.5)
     assert DQNAgent(M, np.random.default_rng(0), config).config is config
     assert DQNAgent(M, np.random.default_rng(0), config, gamma=0.7).config == DQNConfig(lr=5e-4, gamma=0.7)
@@ -921,7 +901,7 @@ def _continue(agent: DQNAgent) -> tuple[list, list]:
 @pytest.mark.parametrize(
     ("name", "exploration", "extra"),
     [("dqn", "slot", {}), ("dueling_ddqn", "episode", {}),
-     ("dueling_ddqn", "slot", {"lr_end": 1e-4, "lr_decay_steps": 300})],  # mid-schedule at the save
+     ("dueling_ddqn", "slot", {"n_step": 3, "tau": 0.5})],
 )  # fmt: skip
 def test_restored_agent_continues_exactly(tmp_path, via, name, exploration, extra):
     original = _mid_training(name, exploration, **extra)
@@ -930,7 +910,7 @@ def test_restored_agent_continues_exactly(tmp_path, via, name, exploration, extr
         save_checkpoint(tmp_path, {"format": "evcd.train/1", "agent": state, "episode": 25}, "ckpt_25")
         state = load_checkpoint(tmp_path)["agent"]
     restored = make_agent(name, M, np.random.default_rng(999), exploration=exploration, **RESUME, **extra)
-    assert not _equal(_params(restored.online), _params(original.online))
+    assert not _equal(_params(restored.policy.online), _params(original.policy.online))
     restored.load_state_dict(state)
     assert restored.stats() == original.stats()
     # the current generator too: an episode begun without a new generator explores alike
@@ -945,8 +925,8 @@ def test_restored_agent_continues_exactly(tmp_path, via, name, exploration, extr
     assert losses_a == losses_b
     assert original.stats() == restored.stats()
     assert original.gradient_steps > 100
-    assert _equal(_params(original.online), _params(restored.online))
-    assert _equal(_params(original.target), _params(restored.target))
+    assert _equal(_params(original.policy.online), _params(restored.policy.online))
+    assert _equal(_params(original.policy.target), _params(restored.policy.target))
     assert state_equal(original.optimizer.state_dict(), restored.optimizer.state_dict())
     assert state_equal(original.replay.state_dict(), restored.replay.state_dict())
     assert original.learn_rng.bit_generator.state == restored.learn_rng.bit_generator.state
@@ -964,8 +944,8 @@ def test_state_dict_is_a_snapshot():
     second.load_state_dict(state)
     assert _continue(first) == (choices, losses)
     assert _continue(second) == (choices, losses)
-    assert _equal(_params(first.online), _params(original.online))
-    assert _equal(_params(second.online), _params(original.online))
+    assert _equal(_params(first.policy.online), _params(original.policy.online))
+    assert _equal(_params(second.policy.online), _params(original.policy.online))
 
 
 def test_a_fresh_agent_does_not_continue_like_the_trained_one():
@@ -975,7 +955,7 @@ def test_a_fresh_agent_does_not_continue_like_the_trained_one():
     _, losses_a = _continue(original)
     _, losses_b = _continue(other)
     assert losses_a != losses_b
-    assert not _equal(_params(original.online), _params(other.online))
+    assert not _equal(_params(original.policy.online), _params(other.policy.online))
 
 
 def test_state_dict_is_what_torch_loads_with_weights_only(tmp_path):
@@ -1016,10 +996,10 @@ def test_the_state_neither_holds_nor_sets_torchs_global_generator():
 def test_load_into_a_mismatched_agent_raises(kwargs, named, policy_only):
     state = _agent(**RESUME).state_dict()
     other = _agent(seed=2, **{**RESUME, **kwargs})
-    before = _params(other.online)
+    before = _params(other.policy.online)
     with pytest.raises(CheckpointError, match=named):
         other.load_state_dict(state, policy_only=policy_only)
-    assert _equal(_params(other.online), before)
+    assert _equal(_params(other.policy.online), before)
 
 
 def test_load_rejects_a_state_that_is_not_a_dqn_agent():
@@ -1037,8 +1017,8 @@ def test_policy_only_loads_just_the_networks():
     fresh = make_agent("dueling_ddqn", M, np.random.default_rng(5), **RESUME)
     optimizer = copy.deepcopy(fresh.optimizer.state_dict())
     fresh.load_state_dict(trained.state_dict(), policy_only=True)
-    assert _equal(_params(fresh.online), _params(trained.online))
-    assert _equal(_params(fresh.target), _params(trained.target))
+    assert _equal(_params(fresh.policy.online), _params(trained.policy.online))
+    assert _equal(_params(fresh.policy.target), _params(trained.policy.target))
     assert fresh.steps == 0
     assert fresh.gradient_steps == 0
     assert len(fresh.replay) == 0
@@ -1063,7 +1043,7 @@ def test_a_loaded_policy_sees_what_it_was_trained_on():
     ):
         other = _agent(seed=3, **kwargs)
         other.load_state_dict(trained.state_dict(), policy_only=True)
-        np.testing.assert_array_equal(other.input_scale, trained.input_scale)
+        np.testing.assert_array_equal(other.policy.inputs.scale, trained.policy.inputs.scale)
         # float32: the input is rounded once more on the way (obs / divisors * scale), so a Q-value
         # near 0 may move by the rounding of the largest ones; compare at that scale
         np.testing.assert_allclose(
@@ -1081,11 +1061,11 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
     for where in (run_dir, run_dir / "checkpoints", run_dir / "checkpoints" / "latest.json"):
         policy = make_agent(name, M, np.random.default_rng(1), **RESUME)
         policy.load(where)
-        assert _equal(_params(policy.online), _params(trained.online))
+        assert _equal(_params(policy.policy.online), _params(trained.policy.online))
         assert policy.steps == 0  # the policy only
         np.testing.assert_array_equal(_decide(policy, obs), _decide(trained, obs))
     built = make_agent(name, M, np.random.default_rng(2), checkpoint=run_dir, **RESUME)
-    assert _equal(_params(built.online), _params(trained.online))
+    assert _equal(_params(built.policy.online), _params(trained.policy.online))
     config = saved_options(run_dir)
     dueling = name == "dueling_ddqn"
     assert config == {
@@ -1093,12 +1073,6 @@ def test_load_a_trainer_checkpoint(tmp_path, name):
         "network": "mlp",
         "double": dueling,
         "dueling": dueling,
-        "in_turn": False,
-        "rule_estimate": False,
-        "rule_prior": False,
-        "rule_prior_bound_s": None,
-        "rule_prior_relative": False,
-        "switch_margin_s": 0.0,
     }
     # a bare agent state (not wrapped by the trainer) works too
     save_checkpoint(tmp_path / "bare", trained.state_dict(), "agent")
@@ -1128,6 +1102,41 @@ def test_a_checkpoint_from_before_the_network_option_holds_the_mlp(tmp_path):
         _agent(seed=2, **{**RESUME, "network": "station"}).load_state_dict(state)
 
 
+#: what a checkpoint of commit c467250 saved of the settings that have left evcd since, at their defaults
+_REMOVED_AT_DEFAULTS = {"lr_end": None, "lr_decay_steps": 10_000, "in_turn": False, "rule_estimate": False,
+                        "rule_prior": False, "rule_prior_bound_s": None, "rule_prior_relative": False,
+                        "switch_margin_s": 0.0}  # fmt: skip
+
+
+def test_a_checkpoint_with_removed_settings_at_their_defaults_still_loads(tmp_path):
+    trained = _agent(**RESUME)
+    state = trained.state_dict()
+    state["config"].update(_REMOVED_AT_DEFAULTS)
+    save_checkpoint(tmp_path, state, "agent")
+    expected = {"hidden": (16, 16), "network": "mlp", "double": False, "dueling": False}
+    assert saved_options(tmp_path) == expected
+    loaded = _agent(seed=2, **RESUME)
+    loaded.load_state_dict(state)
+    obs = _obs(np.random.default_rng(8), 20)
+    np.testing.assert_array_equal(loaded.q_values(obs), trained.q_values(obs))
+
+
+@pytest.mark.parametrize(
+    ("key", "value"), [("rule_prior", True), ("in_turn", True), ("switch_margin_s", 300.0), ("lr_end", 1e-4)]
+)
+def test_a_checkpoint_whose_policy_used_a_removed_setting_is_refused_naming_the_commit(tmp_path, key, value):
+    state = _agent(**RESUME).state_dict()
+    state["config"].update({**_REMOVED_AT_DEFAULTS, key: value})
+    save_checkpoint(tmp_path, state, "agent")
+    expected = rf"learner\.{key}={value}: this setting left evcd; commit c467250 is the last that has it"
+    with pytest.raises(CheckpointError, match=expected):
+        saved_options(tmp_path)
+    with pytest.raises(CheckpointError, match=expected):
+        _agent(seed=2, **RESUME).load_state_dict(state, policy_only=True)
+    with pytest.raises(CheckpointError, match=expected):
+        _agent(seed=2, **RESUME).load(tmp_path)
+
+
 def test_a_non_dqn_checkpoint_is_refused(tmp_path):
     save_checkpoint(tmp_path, {"format": "evcd.train/1", "agent": {"format": "greedy"}}, "ckpt_1")
     with pytest.raises(CheckpointError, match="DQN"):
@@ -1155,9 +1164,9 @@ def test_same_seed_same_weights_other_seed_differs():
     c, _ = trained(41)
     assert a.gradient_steps > 0
     assert rows_a == rows_b
-    assert _equal(_params(a.online), _params(b.online))
-    assert _equal(_params(a.target), _params(b.target))
-    assert not _equal(_params(a.online), _params(c.online))
+    assert _equal(_params(a.policy.online), _params(b.policy.online))
+    assert _equal(_params(a.policy.target), _params(b.policy.target))
+    assert not _equal(_params(a.policy.online), _params(c.policy.online))
 
 
 def test_no_global_random_state_is_used():

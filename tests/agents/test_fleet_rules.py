@@ -15,7 +15,7 @@ from evcd.agents import (
     observation_blocks,
     split_observation,
 )
-from evcd.agents.fleet_rules import CentralAgent, CentralEpisode, ReservationAgent
+from evcd.agents.fleet_rules import CentralAgent, FleetRuleEpisode, ReservationAgent
 from evcd.agents.heuristics import (
     FixedStationAgent,
     ForecastQueueAgent,
@@ -256,8 +256,8 @@ def test_central_does_not_count_twice_the_evs_it_sent_at_the_last_tick():
 def test_central_frees_the_place_of_an_ev_it_moves():
     central = CentralAgent(2, np.random.default_rng(0), **ONE_POINT)
     episodes = [
-        CentralEpisode(np.random.default_rng(0), station=1),
-        CentralEpisode(np.random.default_rng(1), 1),
+        FleetRuleEpisode(np.random.default_rng(0), station=1),
+        FleetRuleEpisode(np.random.default_rng(1), 1),
     ]
     # both were sent to station 1; each sees the other heading there; both 100 s away
     batch = np.stack([fleet_obs([1000.0, 1000.0], h=[0, 1])] * 2)
@@ -372,71 +372,3 @@ def test_make_agent_for_env_reads_a_pettingzoo_fleet():
     agent = make_agent_for_env("central", env, np.random.default_rng(0))
     assert isinstance(agent, CentralAgent) and agent.n_stations == 3
     assert agent.points.tolist() == [2, 3, 1] and agent.normalized
-
-
-# ---------------------------------------------------------------------------------------- damping
-#: Two stations of one point, 2 km and 3 km away, empty: the first is 100 s sooner (10 m/s).
-NEAR_FIRST = fleet_obs([2000.0, 3000.0])
-#: The same, but two vehicles wait at the first: it is 1,350 s later than the second (one charge).
-BUSY_FIRST = fleet_obs([2000.0, 3000.0], z=[2.0, 0.0])
-
-
-@pytest.mark.parametrize("cls", [ReservationAgent, CentralAgent])
-def test_a_switch_margin_keeps_a_station_unless_another_is_sooner_by_more(cls):
-    def decide(margin: float, sent_to: int | None, obs: np.ndarray) -> int:
-        agent = cls(2, np.random.default_rng(0), points=1, switch_margin_s=margin)
-        (state,) = states(agent, 1)
-        state.station = sent_to
-        (choice,) = agent.decide(obs[None], [state])
-        assert state.station == choice  # the state records where the EV is sent
-        return int(choice)
-
-    # sent to the farther station: 100 s to gain by switching
-    assert decide(0.0, 1, NEAR_FIRST) == 0  # the plain rule
-    assert decide(50.0, 1, NEAR_FIRST) == 0  # 100 s > 50 s: switch
-    assert decide(150.0, 1, NEAR_FIRST) == 1  # 100 s <= 150 s: keep
-    assert decide(150.0, None, NEAR_FIRST) == 0  # a first decision is free
-    assert decide(5000.0, 0, BUSY_FIRST) == 0  # a margin wider than any gain keeps everything
-    assert decide(1000.0, 0, BUSY_FIRST) == 1  # a queue costing 1,250 s more is left
-
-
-def test_an_ev_waiting_in_a_car_park_keeps_it_within_the_margin():
-    # the EV waits at station 0 (D = 0, counted in Z with one vehicle charging ahead): 1,350 s of
-    # backlog against 300 s of driving to the empty station 1
-    waiting = fleet_obs([0.0, 3000.0], z=[2.0, 0.0])
-    for margin, expected in ((0.0, 1), (1000.0, 1), (1100.0, 0)):
-        agent = ReservationAgent(2, np.random.default_rng(0), points=1, switch_margin_s=margin)
-        assert int(agent.decide(waiting[None], states(agent, 1))[0]) == expected, margin
-
-
-def test_a_zero_margin_is_the_plain_rule_and_a_negative_one_is_refused():
-    rng = np.random.default_rng(3)
-    obs = random_fleet_obs(rng, m=4, k=30)
-    for cls in (ReservationAgent, CentralAgent):
-        plain, zero = cls(4, rng, points=2), cls(4, rng, points=2, switch_margin_s=0.0)
-        a, b = states(plain, 30), states(zero, 30)
-        for st in a + b:
-            st.station = 1  # every EV was sent to station 1 before
-        assert plain.decide(obs, a).tolist() == zero.decide(obs, b).tolist()
-    expected = ReservationAgent(4, rng, points=2).estimate(obs).argmin(axis=1)
-    assert ReservationAgent(4, rng, points=2).decide(obs, states(plain, 30)).tolist() == expected.tolist()
-    with pytest.raises(ValueError, match="switch_margin_s"):
-        ReservationAgent(2, rng, switch_margin_s=-1.0)
-    assert CentralEpisode(rng).station is None  # the former name of the episode state still works
-
-
-def test_central_counts_a_kept_ev_where_it_already_was():
-    """Two EVs deciding at one tick, the first (soonest) already sent to station 0 and kept there by
-    the margin although station 1 is 100 s sooner for it: it moves nobody, so the second EV still
-    counts it at station 0 (in H) and takes station 1."""
-    agent = CentralAgent(2, np.random.default_rng(0), points=1, switch_margin_s=150.0)
-    first = fleet_obs([3000.0, 2000.0])
-    second = fleet_obs([5000.0, 2500.0], h=[1.0, 0.0])
-    a, b = states(agent, 2)
-    a.station, b.station = 0, None
-    assert agent.decide(np.stack([first, second]), [a, b]).tolist() == [0, 1]
-    # without the margin the first moves to station 1, the second then finds station 0 free: swapped
-    plain = CentralAgent(2, np.random.default_rng(0), points=1)
-    a, b = states(plain, 2)
-    a.station, b.station = 0, None
-    assert plain.decide(np.stack([first, second]), [a, b]).tolist() == [1, 0]

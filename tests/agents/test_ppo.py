@@ -408,10 +408,10 @@ def test_fleet_observations_are_accepted_with_four_blocks():
 def test_observations_are_scaled_before_the_network():
     points = [2, 1, 4]
     agent = _agent(points=points)
-    np.testing.assert_allclose(agent.input_scale, 1.0 / unit_divisors(points, 3), rtol=1e-6)
+    np.testing.assert_allclose(agent.inputs.scale, 1.0 / unit_divisors(points, 3), rtol=1e-6)
     raw = np.random.default_rng(12).uniform(0, 3000, size=(6, OBS_DIM)).astype(np.float32)
     with torch.no_grad():
-        logits = agent.actor(torch.from_numpy(raw * agent.input_scale)).double().numpy()
+        logits = agent.actor(torch.from_numpy(raw * agent.inputs.scale)).double().numpy()
     expected = np.exp(logits) / np.exp(logits).sum(axis=1, keepdims=True)
     np.testing.assert_allclose(agent.probabilities(raw), expected, rtol=1e-5, atol=1e-9)
 
@@ -669,7 +669,7 @@ def test_make_agent_rejects_unknown_options():
 def test_default_settings_are_valid():
     agent = PPOAgent(M, np.random.default_rng(0))
     assert agent.config == PPOConfig()
-    np.testing.assert_array_equal(agent.input_scale, np.ones(OBS_DIM, np.float32))
+    np.testing.assert_array_equal(agent.inputs.scale, np.ones(OBS_DIM, np.float32))
     config = PPOConfig(lr=5e-4, gamma=0.5)
     assert PPOAgent(M, np.random.default_rng(0), config).config == config
     assert PPOAgent(M, np.random.default_rng(0), config, gamma=0.7).config == PPOConfig(lr=5e-4, gamma=0.7)
@@ -904,7 +904,7 @@ def test_a_loaded_policy_sees_what_it_was_trained_on():
     other = _agent(seed=3)
     assert not np.allclose(other.probabilities(raw), trained.probabilities(raw))
     other.load_state_dict(trained.state_dict(), policy_only=True)
-    np.testing.assert_array_equal(other.input_scale, trained.input_scale)
+    np.testing.assert_array_equal(other.inputs.scale, trained.inputs.scale)
     np.testing.assert_allclose(other.probabilities(raw), trained.probabilities(raw), rtol=1e-6)
 
 

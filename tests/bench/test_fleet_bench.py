@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from evcd.agents.dqn_config import DQNConfig
+from evcd.agents.dqn import DQNConfig
 from evcd.bench.fleet import fleet_learning_rate, fleet_overhead
 from tests.conftest import FLEET_DEMAND, FLEET_WINDOW
 

@@ -216,7 +216,7 @@ def test_batched_learning_is_deterministic(make_env):
         agent.observe = observe  # type: ignore[method-assign]
         rows = runner.run(specs, agent, explore=True, learn=True)
         runner.close()
-        weights = [p.detach().clone() for p in agent.online.parameters()]
+        weights = [p.detach().clone() for p in agent.policy.online.parameters()]
         results.append((rows, seen, weights, agent.gradient_steps))
     (rows_a, seen_a, w_a, g_a), (rows_b, seen_b, w_b, g_b) = results
     assert [dataclass_no_wall(r) for r in rows_a] == [dataclass_no_wall(r) for r in rows_b]

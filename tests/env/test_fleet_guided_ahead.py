@@ -53,10 +53,10 @@ def test_g_counts_the_guided_evs_due_before_this_one(make_small_fleet):
 def test_g_is_the_part_of_h_due_first_along_whole_episodes(make_fleet):
     """On the 8 x 8 grid's fleet, every agent's ``G`` at every tick is, per station, the other agents
     driving there whose ``T`` to it is below this one's ``T`` there; never above ``H``, below it at
-    some ticks; a learner deciding the ticks in turn (exploring) reads the layout."""
+    some ticks; a learner (exploring) reads the layout."""
     env = make_fleet(guided_share=1.0, observe=["route_time", "guided_ahead"], decision_interval=30.0)
     m = len(env.stations)
-    learner = make_agent_for_env("dqn", env, np.random.default_rng(0), in_turn=True)
+    learner = make_agent_for_env("dqn", env, np.random.default_rng(0))
     assert learner.layout == "DNZHTG"
     obs, _ = env.reset(seed=2)
     states: dict[str, object] = {}

@@ -20,7 +20,6 @@ from evcd.loops.train import train_and_evaluate
 from evcd.loops.validation import ValidationPoint, ValidationRecord, ValidationSettings
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint
 from tests.loops.test_fleet_loop import TWO_EVS
-from tests.loops.test_fleet_train import CONFIG as CONFIG_FLEET
 from tests.loops.test_fleet_train import Fleet, _agent, _rules, _same, _weights
 from tests.loops.test_fleet_train import _settings as fleet_settings
 from tests.loops.test_train import (
@@ -63,7 +62,7 @@ def test_select_best_needs_a_validation_and_a_boolean():
 def _perturbed(agent, seed: int) -> None:
     gen = torch.Generator().manual_seed(seed)
     with torch.no_grad():
-        for p in agent.online.parameters():
+        for p in agent.policy.online.parameters():
             p.add_(torch.randn(p.shape, generator=gen))
 
 
@@ -147,49 +146,3 @@ def test_a_fleet_run_with_select_best_evaluates_the_kept_policy(make_small_fleet
     assert _same(_weights(agent), kept["agent"]["online"])
     assert _same(load_checkpoint(tmp_path / "a" / CHECKPOINTS)["agent"]["online"], _weights(plain))
     assert np.isfinite(data["summary"]["guided_travel"])
-
-
-def test_at_start_needs_a_validation_and_a_boolean_and_runs_once():
-    with pytest.raises(ValueError, match=r"at_start=true needs a validation.*every > 0"):
-        ValidationSettings(every=0, at_start=True)
-    with pytest.raises(ValueError, match=r"at_start=1: must be true or false"):
-        ValidationSettings(every=10, at_start=1)  # type: ignore[arg-type]
-    settings = ValidationSettings(every=10, at_start=True)
-    assert settings.due_at_start(0, ValidationRecord())
-    # a resumed run that validated its start already, or has trained, does not validate it again
-    assert not settings.due_at_start(0, ValidationRecord([_point(0, 100.0)]))
-    assert not settings.due_at_start(10, ValidationRecord())
-    assert not ValidationSettings(every=10).due_at_start(0, ValidationRecord())
-
-
-def test_a_validation_at_start_scores_the_untrained_policy_and_can_be_selected(
-    make_small_fleet, tmp_path, one_torch_thread
-):
-    """The learner from reservation's prior starts as reservation: its validation before training
-    plays the rule's very travel times; select_best can then keep that start, and training is the
-    same as without the extra validation."""
-    env = make_small_fleet(TWO_EVS, max_travel_time=900.0)
-    fleet = Fleet(train=env, eval=env, validation=env)
-    base = fleet_settings(every=2)
-    at_start = dataclasses.replace(base, validation=ValidationSettings(2, 1, select_best=True, at_start=True))
-    prior = dataclasses.replace(CONFIG_FLEET, rule_prior=True)
-    agent, plain = _agent(env, config=prior), _agent(env, config=prior)
-    rules = _rules(env, "reservation", "greedy")
-    train_and_evaluate(agent, fleet, at_start, tmp_path / "a", validation_rules=rules)
-    train_and_evaluate(plain, fleet, base, tmp_path / "b", validation_rules=_rules(env, "reservation"))
-    data = json.loads((tmp_path / "a" / RESULTS_JSON).read_text())
-    points = data["validation"]["points"]
-    assert [p["episodes_done"] for p in points] == [0, 2, 4, 6]
-    assert points[0]["transitions"] == 0
-    assert points[0]["travel_times"] == data["validation"]["rules"]["reservation"]
-    plain_points = json.loads((tmp_path / "b" / RESULTS_JSON).read_text())["validation"]["points"]
-    assert [p["episodes_done"] for p in plain_points] == [2, 4, 6]
-    assert points[1:] == plain_points
-    assert _same(load_checkpoint(tmp_path / "a" / CHECKPOINTS)["agent"]["online"], _weights(plain))
-    assert data["training"]["evaluated_after_episodes"] == data["validation"]["best_episodes_done"]
-    kept = load_checkpoint(tmp_path / "a" / BEST_DIR)
-    assert kept["episodes_done"] == data["validation"]["best_episodes_done"]
-    # here the start is the best (reservation's 44 s; the last policy sends an EV the greedy way):
-    # the evaluated policy is the untrained one, not the last weights
-    assert data["validation"]["best_episodes_done"] == 0 and points[-1]["mean"] > points[0]["mean"]
-    assert not _same(kept["agent"]["online"], _weights(plain))

@@ -117,14 +117,12 @@ SPLIT_LEARNERS = {
 }  # fmt: skip
 
 
-@pytest.mark.parametrize(
-    ("learner", "in_turn"), [("dueling_ddqn", False), ("dueling_ddqn", True), ("ppo", False)]
-)
+@pytest.mark.parametrize("learner", ["dueling_ddqn", "ppo"])
 def test_the_shared_learner_finds_the_best_split_of_two_evs(
-    make_small_fleet, one_torch_thread, learner: str, in_turn: bool
+    make_small_fleet, one_torch_thread, learner: str
 ) -> None:
     from evcd.agents import make_agent_for_env
-    from evcd.agents.dqn_config import DQNConfig
+    from evcd.agents.dqn import DQNConfig
 
     env = make_small_fleet(TWO_EVS, max_travel_time=900.0)
     totals = {}
@@ -141,12 +139,12 @@ def test_the_shared_learner_finds_the_best_split_of_two_evs(
     if learner == "ppo":
         agent = make_agent_for_env("ppo", env, np.random.default_rng(0), **settings)
     else:
-        config = DQNConfig(**settings, in_turn=in_turn)
+        config = DQNConfig(**settings)
         agent = make_agent_for_env(learner, env, np.random.default_rng(0), config=config)
-    assert agent.obs_dim == 8
+    assert agent.layout == "DNZH" and len(env.stations) == 2
     specs = episode_specs(0, range(100), TRAIN_STREAM)
     played = FleetRunner(env).run(specs, agent, explore=True, learn=True)  # ~800 agent steps
-    # every agent step reached the learner (in turn: each one at the EV's next decision or its end)
+    # every agent step reached the learner
     assert agent.steps == sum(ep.transitions for ep in played)
     if learner == "ppo":
         assert agent.stats()["updates"] >= 10 and agent.stats()["episodes"] == 2 * len(played)

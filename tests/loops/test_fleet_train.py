@@ -16,7 +16,7 @@ import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from evcd.agents import make_agent_for_env
-from evcd.agents.dqn_config import DQNConfig
+from evcd.agents.dqn import DQNConfig
 from evcd.env.runners import FleetRunner
 from evcd.loops.fleet import FleetTrainState
 from evcd.loops.train import TrainSettings, train_and_evaluate

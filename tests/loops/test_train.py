@@ -218,8 +218,8 @@ def test_a_rule_agent_is_only_evaluated(tmp_path):
 
 # ---------------------------------------------------------------------------------------- resume
 def _weights(agent) -> dict[str, torch.Tensor]:
-    return {**{f"online.{k}": v for k, v in agent.online.state_dict().items()},
-            **{f"target.{k}": v for k, v in agent.target.state_dict().items()}}  # fmt: skip
+    return {**{f"online.{k}": v for k, v in agent.policy.online.state_dict().items()},
+            **{f"target.{k}": v for k, v in agent.policy.target.state_dict().items()}}  # fmt: skip
 
 
 def _without_wall(rows: list[dict[str, str]]) -> list[dict[str, str]]:
@@ -272,6 +272,22 @@ def test_resume_with_other_settings_is_refused(trained, tmp_path):
             restore_training(run_dir, learner(), added(on))
     for off in (False, None, []):
         assert restore_training(run_dir, learner(), added(off)).episodes_done == 10
+
+
+@pytest.mark.parametrize(("value", "resumes"), [(False, True), (True, False)])
+def test_resuming_a_run_made_with_a_removed_setting(tmp_path, value, resumes):
+    """A run of an earlier evcd recorded a setting that has left evcd since: at the value that did
+    nothing it resumes; where the run used it, it is refused naming the last commit that has it."""
+    run_dir = tmp_path / "run"
+    old = {**CONFIG, "learner": {**CONFIG["learner"], "rule_prior": value}}
+    with pytest.raises(KeyboardInterrupt):
+        train_and_evaluate(learner(), interrupted_after(12), settings(), run_dir, config=old)
+    if resumes:
+        assert restore_training(run_dir, learner(), CONFIG).episodes_done == 10
+    else:
+        expected = r"learner\.rule_prior=True: this setting left evcd; commit c467250"
+        with pytest.raises(ValueError, match=expected):
+            restore_training(run_dir, learner(), CONFIG)
 
 
 def test_a_run_directory_is_never_reused_or_overwritten(trained, tmp_path):
@@ -366,7 +382,7 @@ def test_the_periodic_validation_does_not_touch_training(trained, validated):
     """A run with validations trains to exactly the weights, rows and evaluation of one without."""
     (plain_dir, plain, plain_result), (run_dir, agent, result) = trained, validated
     assert agent.steps == plain.steps and agent.gradient_steps == plain.gradient_steps
-    for a, b in zip(agent.online.parameters(), plain.online.parameters(), strict=True):
+    for a, b in zip(agent.policy.online.parameters(), plain.policy.online.parameters(), strict=True):
         assert torch.equal(a, b)
 
     def rows(d):

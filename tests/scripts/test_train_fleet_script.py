@@ -125,44 +125,6 @@ def test_train_a_fleet_then_evaluate_its_policy(small, script_overrides, tmp_pat
     assert proc.returncode == 2 and "that run is complete" in proc.stdout + proc.stderr
 
 
-@pytest.mark.parametrize(
-    ("estimate", "prior", "margin"),
-    [(False, False, 0), (True, False, 0), (True, True, 0), (True, True, 120)],
-    ids=["observation", "rule_estimate", "rule_prior", "switch_margin"],
-)  # fmt: skip
-def test_a_policy_trained_in_turn_is_evaluated_in_turn(
-    small, script_overrides, tmp_path, estimate, prior, margin
-):
-    run = tmp_path / "run"
-    proc = run_script("train.py", *small, "agent=dqn", "learner.in_turn=true", "eval.baselines=[]",
-                      f"learner.rule_estimate={estimate}", f"learner.rule_prior={prior}",
-                      f"learner.switch_margin_s={margin}", f"hydra.run.dir={run}")  # fmt: skip
-    log = proc.stdout + proc.stderr
-    assert proc.returncode == 0, log[-3000:]
-    settings = "in turn" + (", rule estimate" if estimate else "") + (", rule prior" if prior else "")
-    settings += f", switch margin {margin} s" if margin else ""
-    assert f"target_update=20, {settings})" in log
-    data = json.loads((run / "results.json").read_text())
-
-    def evaluate(out: Path, *more: str) -> tuple[str, dict]:
-        proc = run_script("evaluate.py", *script_overrides, "task=fleet", "evs=300",
-                          "scenario.demand.charging_share=0.6", "env.departure_window=[21600,25200]",
-                          "env.demand_seeds=[1]", "episodes=1", "agent=dqn", f"agent.checkpoint={run}",
-                          f"hydra.run.dir={out}", *more)  # fmt: skip
-        log = proc.stdout + proc.stderr
-        assert proc.returncode == 0, log[-3000:]
-        return log, json.loads((out / "results.json").read_text())
-
-    log, again = evaluate(tmp_path / "eval")
-    # the checkpoint says how its policy decides a tick and what its network reads (not the learner
-    # block), its switching margin included
-    assert f"{settings})" in log
-    assert again["summary"]["guided_travel"] == pytest.approx(data["summary"]["guided_travel"])
-    if margin:  # a decision setting: the evaluation may set another
-        log, _ = evaluate(tmp_path / "other", "+agent.switch_margin_s=900")
-        assert f"{settings.replace(f'{margin} s', '900 s')})" in log
-
-
 def test_a_rule_is_evaluated_on_the_fleet_without_training(small, tmp_path):
     run = tmp_path / "run"
     proc = run_script(

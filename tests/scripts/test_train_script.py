@@ -23,8 +23,7 @@ from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from evcd.agents import agent_class
-from evcd.agents.dqn import DQNAgent
-from evcd.agents.dqn_config import DQNConfig
+from evcd.agents.dqn import DQNAgent, DQNConfig
 from evcd.cli.params import agent_params
 from evcd.env import ChargingNavEnv
 from evcd.experiments.worlds import env_kwargs
@@ -378,7 +377,8 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("learner.hidden=[]", "hidden=[]"),
         ("learner.epsilon_start=1.5", "epsilon_start=1.5"),
         ("learner.loss=l1", "loss='l1'"),
-        ("learner.in_turn=true", "in_turn=True with observations DNZ (3 blocks): in_turn is the fleet's"),
+        ("learner.in_turn=true", "learner.in_turn=true: this setting left evcd; commit c467250 is the last"),
+        ("learner.rule_prior=false", "learner.rule_prior=false: this setting left evcd; commit c467250"),
         ("eval.episodes=0", "eval.episodes=0"),
         ("agent.name=dqnn", "dqnn"),
         ("evs=-1", "evs=-1"),
@@ -397,7 +397,8 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         ("eval.days=[-1]", "eval.days=[-1]"),
         ("train.validation.every=0 train.validation.select_best=true", "select_best=true needs a validation"),
         ("train.validation.every=2 train.validation.select_best=maybe", "select_best='maybe'"),
-        ("train.validation.every=0 train.validation.at_start=true", "at_start=true needs a validation"),
+        ("train.validation.every=2 train.validation.at_start=true", "validation.at_start=true: this setting"),
+        ("agent=central +agent.switch_margin_s=300", "agent.switch_margin_s=300: this setting left evcd"),
         ("agent=ppo learner.lr=0.01", "agent=ppo does not read the DQN learners' `learner` block"),
     ],
 )
