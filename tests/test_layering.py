@@ -4,10 +4,11 @@
     utils < scenario < sim < env < agents < loops < report, bench, experiments < cli (< scripts)
 
 A module imports ``evcd`` modules of its own layer or of layers below it, never above it nor a
-sibling (``report``, ``bench`` and ``experiments`` do not import each other). Checked on the source
-(every ``import`` statement of every module, including those inside functions) and on a fresh
-interpreter (what importing a module actually loads); the check is shown to fail on a planted reverse
-import.
+sibling (``report``, ``bench`` and ``experiments`` do not import each other), and no module reaches
+itself through its imports (no circle, inside a folder or across folders). Checked on the source
+(every ``import`` statement of every module, including those inside functions and under
+``TYPE_CHECKING``) and on a fresh interpreter (what importing a module actually loads); each check is
+shown to fail on a planted reverse import or circle.
 """
 
 from __future__ import annotations
@@ -50,6 +51,71 @@ def imported_modules(path: Path) -> set[str]:
             names.add(node.module)
             names.update(f"{node.module}.{alias.name}" for alias in node.names)
     return names
+
+
+def module_name(path: Path, package: Path) -> str:
+    """The dotted name of the module at ``path`` in ``package`` (a package's ``__init__`` is its folder)."""
+    parts = list(path.relative_to(package.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph(package: Path) -> dict[str, set[str]]:
+    """Each module of ``package`` and the modules of ``package`` its import statements name (absolute
+    and relative; ``from a import b`` names ``a.b`` where that is a module, else ``a``)."""
+    paths = {module_name(p, package): p for p in package.rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for name, path in paths.items():
+        here = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        targets: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parent = here[: len(here) - node.level + 1]
+                    base = ".".join([*parent, *([node.module] if node.module else [])])
+                targets.update(f"{base}.{alias.name}" for alias in node.names)
+                targets.add(base)
+        deps = set()
+        for target in targets:
+            while target and target not in paths:
+                target = target.rpartition(".")[0]
+            if target and target != name:
+                deps.add(target)
+        graph[name] = deps
+    return graph
+
+
+def circles(package: Path) -> list[list[str]]:
+    """The circles of imports in ``package``: every set of modules that reach each other through their
+    imports (strongly connected components of :func:`import_graph` with more than one module; Tarjan)."""
+    graph = import_graph(package)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = [stack.pop()]
+            while component[-1] != v:
+                component.append(stack.pop())
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
 
 
 def layer_of(name: str) -> str | None:
@@ -103,6 +169,38 @@ def test_a_planted_reverse_import_is_caught(tmp_path, planted, code):
     (copy / planted).write_text(code)
     found = violations(copy)
     assert found and all(v.startswith(planted) for v in found), found
+
+
+def test_no_circle_of_imports():
+    assert circles(PACKAGE) == []
+
+
+@pytest.mark.parametrize(
+    "planted",
+    [
+        # two modules of one folder (the layering ranks folders and cannot see this)
+        {"loops/planted_a.py": "from evcd.loops.planted_b import b\na = 1\n",
+         "loops/planted_b.py": "from evcd.loops import planted_a\nb = 2\n"},
+        # through an import only a type checker runs, and a relative one
+        {"loops/planted_a.py": "import typing\n\nif typing.TYPE_CHECKING:\n    from .tasks import Task\n",
+         "loops/tasks.py": "+from evcd.loops import planted_a\n"},
+        # a module and its own package's __init__, inside a function
+        {"utils/planted_a.py": "def f():\n    from evcd.utils import check_int\n",
+         "utils/__init__.py": "+from evcd.utils.planted_a import f\n"},
+    ],
+)  # fmt: skip
+def test_a_planted_circle_is_caught(tmp_path, planted):
+    """Each plant makes one circle (a ``+`` appends its line to the module, else the text is the
+    module); the check names every module of it."""
+    copy = tmp_path / "evcd"
+    shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    assert circles(copy) == []
+    for rel, code in planted.items():
+        path = copy / rel
+        path.write_text(path.read_text() + code[1:] if code.startswith("+") else code)
+    found = circles(copy)
+    expected = {module_name(copy / rel, copy) for rel in planted}
+    assert len(found) == 1 and expected <= set(found[0]), found
 
 
 def test_no_module_is_over_the_size_a_reader_holds():

@@ -24,9 +24,8 @@ from evcd.agents import check_agent_task
 from evcd.env.runners.base import EpisodeSpec
 from evcd.env.runners.fleet import FleetEpisode
 from evcd.loops.seeds import EVAL_STREAM, bootstrap_rng, episode_spec
-from evcd.loops.stats import BOOTSTRAP_RESAMPLES, bootstrap_ci, paired_values
+from evcd.loops.stats import BOOTSTRAP_RESAMPLES, bootstrap_ci, finite_mean, paired_values
 from evcd.loops.train_state import TrainState
-from evcd.loops.validation import finite_mean
 from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)

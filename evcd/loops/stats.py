@@ -19,6 +19,12 @@ import numpy as np
 from evcd.env.runners.base import EpisodeRow
 from evcd.utils.validation import check_int, check_real
 
+
+def finite_mean(values: Sequence[float]) -> float:
+    """The mean of the finite values (a truncated episode's NaN left out); NaN if there is none."""
+    charged = [v for v in values if math.isfinite(v)]
+    return float(np.mean(charged)) if charged else math.nan
+
 BOOTSTRAP_RESAMPLES = 10_000
 
 

@@ -53,7 +53,7 @@ from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
 from evcd.loops.progress import EpisodeProgress
 from evcd.loops.run_files import CURVE_PNG, RESULTS_JSON, episodes_csv_text, results_dict, rows_csv_text
-from evcd.loops.seeds import TRAIN_STREAM, episode_specs
+from evcd.loops.seeds import TRAIN_STREAM, VALIDATION_STREAM, episode_specs
 from evcd.loops.stats import BOOTSTRAP_RESAMPLES, EvalResult
 from evcd.loops.tasks import Task, task_of
 from evcd.loops.train_log import TrainLog
@@ -248,7 +248,10 @@ def train_and_evaluate(
             validator = None
             if settings.validation.every:
                 rules = validation_rules or {}
-                validator = Validator(runners, settings.validation, settings.seed, rules, task)
+                def specs(played: EpisodeRunner) -> list[EpisodeSpec]:
+                    return task.specs(settings.seed, settings.validation.episodes, played, VALIDATION_STREAM)
+
+                validator = Validator(runners, settings.validation, rules, specs)
             train_episodes(agent, lambda: runners("train"), training_specs(settings), settings, run_dir,
                            state, config, tlog, validator)  # fmt: skip
         check_learned(agent, episodes)

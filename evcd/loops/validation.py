@@ -3,9 +3,10 @@
 The training curve of a run plays each call's episodes in the order of their departures, so it
 rises and falls with the peaks of the day. The validation curve does not: every ``every`` training
 episodes the current policy, without exploration and without learning, plays the same fixed set of
-validation episodes (stream :data:`~evcd.loops.seeds.VALIDATION_STREAM` of the run seed, on the
-validation days), and the rules (greedy, queue_aware) play the very same episodes once, so that
-each point of the curve is comparable with the others and with the rules.
+validation episodes (the task's first ``episodes`` of stream
+:data:`~evcd.loops.seeds.VALIDATION_STREAM` of the run seed, on the validation days:
+:meth:`evcd.loops.tasks.Task.specs`), and the rules (greedy, queue_aware) play the very same
+episodes once, so that each point of the curve is comparable with the others and with the rules.
 
 The validation neither explores nor learns and draws from generators of its own, so a run with it
 trains to exactly the weights of a run without it (tested). With ``select_best`` the run evaluates
@@ -19,17 +20,12 @@ import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
+from typing import Any
 
 from evcd.agents.base import Agent
 from evcd.env.runners import EpisodeRunner, EpisodeSpec
-from evcd.loops.seeds import VALIDATION_STREAM, episode_specs
+from evcd.loops.stats import finite_mean
 from evcd.utils.validation import check_int
-
-if TYPE_CHECKING:
-    from evcd.loops.tasks import Task
 
 log = logging.getLogger(__name__)
 
@@ -131,12 +127,6 @@ class ValidationRecord:
         return cls(points, {name: floats(times) for name, times in d.get("rules", {}).items()})
 
 
-def finite_mean(values: list[float]) -> float:
-    """The mean of the finite values (a truncated episode's NaN left out); NaN if there is none."""
-    charged = [v for v in values if math.isfinite(v)]
-    return float(np.mean(charged)) if charged else math.nan
-
-
 def _json(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
@@ -152,11 +142,9 @@ class Validator:
         runners: makes the validation runner (``runners("validation")``); made and closed per
             validation (libsumo: one simulation per process, the training runner's is closed first).
         settings: how often and how many episodes.
-        seed: the run seed.
         rules: the rules validated once on the same episodes, by name.
-        task: the episodes' task (:mod:`evcd.loops.tasks`): the validation episodes are its first
-            ``settings.episodes`` of the validation stream of ``seed`` (the fleet's take the days in
-            turn); ``None``: the single target's.
+        specs: ``specs(runner)`` -> the validation episodes (the same at every validation; the run's
+            task says which: :meth:`evcd.loops.tasks.Task.specs` of the validation stream).
 
     A validation value is a row's ``travel_time`` (NaN where it is ``truncated``): the target's travel
     time, or a fleet episode's guided EVs' mean.
@@ -166,21 +154,13 @@ class Validator:
         self,
         runners: Callable[[str], EpisodeRunner],
         settings: ValidationSettings,
-        seed: int,
         rules: Mapping[str, Agent],
-        task: Task | None = None,
+        specs: Callable[[EpisodeRunner], list[EpisodeSpec]],
     ) -> None:
         self.runners = runners
         self.settings = settings
-        self.seed = seed
-        self.task = task
         self.rules = dict(rules)
-
-    def specs(self, runner: EpisodeRunner) -> list[EpisodeSpec]:
-        """The validation episodes (the same at every validation)."""
-        if self.task is None:
-            return episode_specs(self.seed, range(self.settings.episodes), VALIDATION_STREAM)
-        return self.task.specs(self.seed, self.settings.episodes, runner, VALIDATION_STREAM)
+        self.specs = specs
 
     def due(self, episodes_done: int, total: int) -> bool:
         """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""
