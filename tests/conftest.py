@@ -304,6 +304,43 @@ def run_refused(script: str, overrides: Sequence[str], *args: str, cache: Path) 
     return log
 
 
+#: Runs a script's ``__main__`` once per argument list of a JSON file, in this one process, and writes
+#: each run's exit code and output (stdout and stderr) to another JSON file.
+_REFUSALS_DRIVER = """
+import contextlib, io, json, logging, runpy, sys
+from hydra.core.global_hydra import GlobalHydra
+script, cases, results = sys.argv[1:4]
+out = []
+for args in json.loads(open(cases).read()):
+    buf, code = io.StringIO(), 0
+    logging.getLogger().handlers.clear()  # the last run's handlers write to its own buffer
+    sys.argv = [script, *args]
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+        try:
+            runpy.run_path(script, run_name="__main__")
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    GlobalHydra.instance().clear()
+    out.append({"code": code, "log": buf.getvalue()})
+open(results, "w").write(json.dumps(out))
+"""
+
+
+def run_refusals(script: str, cases: Sequence[Sequence[str]], folder: Path) -> list[tuple[int, str]]:
+    """Run ``scripts/<script>`` once per argument list of ``cases``, as ``python scripts/<script> args``
+    runs it (its ``__main__``: Hydra composes, the script checks, a refusal exits with code 2), all in
+    ONE fresh Python process: the many bad-setting cases of a script pay its start once. Returns each
+    run's exit code and output. ``folder`` holds the case files."""
+    import json
+
+    folder.mkdir(parents=True, exist_ok=True)
+    cases_file, results_file = folder / "cases.json", folder / "results.json"
+    cases_file.write_text(json.dumps([[str(a) for a in case] for case in cases]))
+    proc = run_script(script, str(SCRIPTS / script), cases_file, results_file, code=_REFUSALS_DRIVER)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    return [(r["code"], r["log"]) for r in json.loads(results_file.read_text())]
+
+
 def compose_config(config_name: str, *overrides: str, return_hydra_config: bool = False) -> DictConfig:
     """The config a script composes (``train``, ``evaluate``, ``inspect``) with ``overrides``."""
     register_configs(CONF)

@@ -29,7 +29,7 @@ from evcd.env import ChargingNavEnv
 from evcd.experiments.worlds import env_kwargs
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.utils.checkpoint import load_checkpoint
-from tests.conftest import CONF, SCRIPTS, compose_config, run_script
+from tests.conftest import CONF, SCRIPTS, compose_config, run_refusals, run_refused, run_script
 
 SCRIPT = SCRIPTS / "train.py"
 EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
@@ -367,50 +367,71 @@ def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
         assert json.loads((sweep / job / "results.json").read_text())["agent"] == agent
 
 
-@pytest.mark.parametrize(
-    "override,needle",
-    [
-        ("train.episodes=0", "train.episodes=0"),
-        ("learner.batch_size=0", "batch_size=0"),
-        ("learner.lr=-0.1", "lr=-0.1"),
-        ("learner.buffer_size=2", "buffer_size=2 < batch_size=4"),
-        ("learner.hidden=[]", "hidden=[]"),
-        ("learner.epsilon_start=1.5", "epsilon_start=1.5"),
-        ("learner.loss=l1", "loss='l1'"),
-        ("learner.in_turn=true", "learner.in_turn=true: this setting left evcd; commit c467250 is the last"),
-        ("learner.rule_prior=false", "learner.rule_prior=false: this setting left evcd; commit c467250"),
-        ("eval.episodes=0", "eval.episodes=0"),
-        ("agent.name=dqnn", "dqnn"),
-        ("evs=-1", "evs=-1"),
-        ("eval.days=[]", "eval.days=[]"),
-        ("env.demand_seeds=[4]", "train.days"),
-        ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is a learner, not a rule; the rules: random"),
-        ("eval.baselines=[foo]", "eval.baselines: 'foo' is not a rule; the rules: random, greedy"),
-        ("train.validation.every=2 train.validation.rules=[dqn]", "validation.rules: 'dqn' is a learner"),
-        ("train.episodes=4 learner.learning_starts=1000", "learning_starts=1000: the 4 training episodes"),
-        ("resume=true", "no checkpoint"),
-        ("agent.checkpoint=x.pt", "agent.checkpoint"),
-        ("engine=fast", "engine='fast'"),
-        ("batch_episodes=0", "batch_episodes=0"),
-        ("train.validation.every=3", "validation.every=3: must be a multiple of train.checkpoint_every"),
-        ("train.validation.every=2 train.validation.days=[0]", "train.validation.days share [0]"),
-        ("eval.days=[-1]", "eval.days=[-1]"),
-        ("train.validation.every=0 train.validation.select_best=true", "select_best=true needs a validation"),
-        ("train.validation.every=2 train.validation.select_best=maybe", "select_best='maybe'"),
-        ("train.validation.every=2 train.validation.at_start=true", "validation.at_start=true: this setting"),
-        ("agent=central +agent.switch_margin_s=300", "agent.switch_margin_s=300: this setting left evcd"),
-        ("agent=ppo learner.lr=0.01", "agent=ppo does not read the DQN learners' `learner` block"),
-    ],
-)
-def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
-    out = tmp_path / "run"
-    proc = run_train(
-        *small, "agent=dqn", "train.checkpoint_every=2", *override.split(), f"hydra.run.dir={out}"
-    )
-    assert proc.returncode == 2, proc.stderr[-2000:]
-    log = proc.stdout + proc.stderr
-    assert needle in log
-    assert "simulating the day" not in log and not (out / "results.json").exists()
+#: Settings train.py refuses before SUMO starts, and what its message says.
+BAD_VALUES = [
+    ("train.episodes=0", "train.episodes=0"),
+    ("learner.batch_size=0", "batch_size=0"),
+    ("learner.lr=-0.1", "lr=-0.1"),
+    ("learner.buffer_size=2", "buffer_size=2 < batch_size=4"),
+    ("learner.hidden=[]", "hidden=[]"),
+    ("learner.epsilon_start=1.5", "epsilon_start=1.5"),
+    ("learner.loss=l1", "loss='l1'"),
+    ("learner.in_turn=true", "learner.in_turn=true: this setting left evcd; commit c467250 is the last"),
+    ("learner.rule_prior=false", "learner.rule_prior=false: this setting left evcd; commit c467250"),
+    ("eval.episodes=0", "eval.episodes=0"),
+    ("agent.name=dqnn", "dqnn"),
+    ("evs=-1", "evs=-1"),
+    ("eval.days=[]", "eval.days=[]"),
+    ("env.demand_seeds=[4]", "train.days"),
+    ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is a learner, not a rule; the rules: random"),
+    ("eval.baselines=[foo]", "eval.baselines: 'foo' is not a rule; the rules: random, greedy"),
+    ("train.validation.every=2 train.validation.rules=[dqn]", "validation.rules: 'dqn' is a learner"),
+    ("train.episodes=4 learner.learning_starts=1000", "learning_starts=1000: the 4 training episodes"),
+    ("resume=true", "no checkpoint"),
+    ("agent.checkpoint=x.pt", "agent.checkpoint"),
+    ("engine=fast", "engine='fast'"),
+    ("batch_episodes=0", "batch_episodes=0"),
+    ("train.validation.every=3", "validation.every=3: must be a multiple of train.checkpoint_every"),
+    ("train.validation.every=2 train.validation.days=[0]", "train.validation.days share [0]"),
+    ("eval.days=[-1]", "eval.days=[-1]"),
+    ("train.validation.every=0 train.validation.select_best=true", "select_best=true needs a validation"),
+    ("train.validation.every=2 train.validation.select_best=maybe", "select_best='maybe'"),
+    ("train.validation.every=2 train.validation.at_start=true", "validation.at_start=true: this setting"),
+    ("agent=central +agent.switch_margin_s=300", "agent.switch_margin_s=300: this setting left evcd"),
+    ("agent=ppo learner.lr=0.01", "agent=ppo does not read the DQN learners' `learner` block"),
+]
+
+
+@pytest.fixture(scope="module")
+def refused(small, tmp_path_factory) -> tuple[Path, list[tuple[int, str]]]:
+    """Every case of :data:`BAD_VALUES` run by train.py (in one process: :func:`run_refusals`), each into
+    its own run directory with its own snapshot cache."""
+    root = tmp_path_factory.mktemp("refused")
+    kept = [o for o in small if not o.startswith("env.cache_dir=")]
+    cases = [[*kept, "agent=dqn", "train.checkpoint_every=2", *override.split(),
+              f"env.cache_dir={root / f'cache{i}'}", f"hydra.run.dir={root / f'run{i}'}"]
+             for i, (override, _) in enumerate(BAD_VALUES)]  # fmt: skip
+    return root, run_refusals("train.py", cases, root)
+
+
+@pytest.mark.xdist_group("train_refusals")
+@pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
+def test_bad_values_stop_before_sumo(refused, case):
+    root, runs = refused
+    code, log = runs[case]
+    assert code == 2, log[-2000:]
+    assert BAD_VALUES[case][1] in log
+    assert not (root / f"cache{case}").exists()  # no day was simulated
+    assert not (root / f"run{case}" / "results.json").exists()
+
+
+def test_a_refusal_exits_with_code_2_in_a_process_of_its_own(small, tmp_path):
+    """What the batched refusals above stand for: ``python scripts/train.py`` itself, refused, exits
+    with code 2 and the message, before any day is simulated, leaving no run directory behind."""
+    kept = [o for o in small if not o.startswith("env.cache_dir=")]
+    log = run_refused("train.py", kept, "agent=dqn", "learner.lr=-0.1", f"hydra.run.dir={tmp_path / 'run'}",
+                      cache=tmp_path / "cache")  # fmt: skip
+    assert "lr=-0.1" in log and not (tmp_path / "run").exists()
 
 
 def test_a_learner_that_took_no_gradient_step_is_not_reported(small, tmp_path):
