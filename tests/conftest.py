@@ -6,12 +6,20 @@ them, and the scripts run as a user runs them (a subprocess) or composed as Hydr
   environments on it with a light, short background day (:data:`GRID_ENV`);
 - ``make_fleet`` / ``make_small_fleet``: fleets (:mod:`evcd.env.fleet`) on the 8 x 8 grid and on
   hand-built days of the small grid;
-- :func:`run_script`, :func:`compose_config` and ``script_overrides`` (a tiny run of a script on the
-  8 x 8 grid): what the script tests share.
+- :func:`run_script`, :func:`run_refusals`, :func:`compose_config` and ``script_overrides`` (a tiny run
+  of a script on the 8 x 8 grid): what the script tests share.
+
+The session's scenarios and snapshot caches are built once per test run, not once per pytest-xdist
+worker: they live in a folder every worker of the run shares (:func:`shared_folder`), and the first
+worker that needs one builds it under a lock while the others wait (the day caches lock each day
+themselves).
 """
 
 from __future__ import annotations
 
+import fcntl
+import os
+import shutil
 import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
@@ -39,11 +47,31 @@ CONF = ROOT / "conf"
 SCRIPTS = ROOT / "scripts"
 
 
+def shared_folder(
+    tmp_path_factory: pytest.TempPathFactory, name: str, build: Callable[[Path], Any] | None = None
+) -> Path:
+    """The folder ``name`` that every pytest-xdist worker of this test run shares (under the run's
+    temporary root; without xdist, under the session's own), made once: the first worker to ask runs
+    ``build(folder)`` under a lock, the others wait and reuse it. A build that failed is redone."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder = root / name
+    with open(root / f".{name}.lock", "a+") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (root / f".{name}.built").exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            if build is not None:
+                build(folder)
+            (root / f".{name}.built").touch()
+    return folder
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _isolated_snapshot_cache(tmp_path_factory: pytest.TempPathFactory):
     """Day snapshots built by tests (and the scripts they start) go to a temporary cache, never ~/.cache."""
     patch = pytest.MonkeyPatch()
-    patch.setenv("EVCD_CACHE", str(tmp_path_factory.mktemp("evcd_cache")))
+    patch.setenv("EVCD_CACHE", str(shared_folder(tmp_path_factory, "evcd_cache")))
     yield
     patch.undo()
 
@@ -80,21 +108,24 @@ class SmallScenario:
         return [self.vtypes_file, self.stations_file]
 
 
+SMALL_STATIONS = (
+    Station(id="cs1", name="one", lane="B1C1_0", start_pos=60.0, end_pos=100.0, points=2),
+    Station(id="cs2", name="two", lane="C2B2_0", start_pos=60.0, end_pos=100.0, points=1),
+)
+
+
+def _build_small_scenario(root: Path) -> None:
+    run_tool("netgenerate", ["--grid", "--grid.number", 4, "--grid.length", 200, "--lefthand", "-o",
+                             root / "grid.net.xml"])  # fmt: skip
+    write_stations(list(SMALL_STATIONS), root / "stations.add.xml")
+    write_vtypes(root / "vtypes.add.xml")
+
+
 @pytest.fixture(scope="session")
 def small_scenario(tmp_path_factory: pytest.TempPathFactory) -> SmallScenario:
-    root = tmp_path_factory.mktemp("small_scenario")
-    net_file = root / "grid.net.xml"
-    run_tool(
-        "netgenerate",
-        ["--grid", "--grid.number", 4, "--grid.length", 200, "--lefthand", "-o", net_file],
-    )
-    stations = (
-        Station(id="cs1", name="one", lane="B1C1_0", start_pos=60.0, end_pos=100.0, points=2),
-        Station(id="cs2", name="two", lane="C2B2_0", start_pos=60.0, end_pos=100.0, points=1),
-    )
-    stations_file = write_stations(list(stations), root / "stations.add.xml")
-    vtypes_file = write_vtypes(root / "vtypes.add.xml")
-    return SmallScenario(root, net_file, stations_file, vtypes_file, stations)
+    root = shared_folder(tmp_path_factory, "small_scenario", _build_small_scenario)
+    return SmallScenario(root, root / "grid.net.xml", root / "stations.add.xml", root / "vtypes.add.xml",
+                         SMALL_STATIONS)  # fmt: skip
 
 
 def make_grid(path: Path, number: int = 8, length: float = 250.0) -> Path:
@@ -144,13 +175,13 @@ GRID_ENV: dict[str, Any] = {
 @pytest.fixture(scope="session")
 def grid_env_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A scenario folder on the 8 x 8 grid (do not modify: shared by the session)."""
-    return make_grid_scenario(tmp_path_factory.mktemp("grid_env"))
+    return shared_folder(tmp_path_factory, "grid_env", make_grid_scenario)
 
 
 @pytest.fixture(scope="session")
 def env_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A snapshot cache shared by the session's environments (days are built once)."""
-    return tmp_path_factory.mktemp("env_cache")
+    return shared_folder(tmp_path_factory, "env_cache")
 
 
 class EnvFactory:
@@ -351,13 +382,14 @@ def compose_config(config_name: str, *overrides: str, return_hydra_config: bool 
 @pytest.fixture(scope="session")
 def script_grid(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The 8 x 8 grid scenario the script tests run on (read-only: shared by the session)."""
-    return make_grid_scenario(tmp_path_factory.mktemp("script_grid") / "grid")
+    folder = shared_folder(tmp_path_factory, "script_grid", lambda root: make_grid_scenario(root / "grid"))
+    return folder / "grid"
 
 
 @pytest.fixture(scope="session")
 def script_overrides(script_grid: Path, tmp_path_factory: pytest.TempPathFactory) -> list[str]:
     """Overrides for a tiny, quick run of a script on the grid (its own snapshot cache, built once)."""
-    cache = tmp_path_factory.mktemp("script_cache")
+    cache = shared_folder(tmp_path_factory, "script_cache")
     return [
         f"scenario.path={script_grid}", "evs=30", "scenario.demand.cars_per_day=300",
         "scenario.demand.min_trip_m=500", "env.departure_window=[21600,23400]", f"env.cache_dir={cache}",

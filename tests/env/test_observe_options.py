@@ -88,7 +88,8 @@ def test_the_layout_reaches_every_agent_and_the_learners_inputs(make_small_env):
         learner = make_agent_for_env(
             name, env, rng, hidden=[8], **({"batch_size": 4} if name == "dqn" else {})
         )
-        assert learner.layout == "DNZPT" and learner.policy.inputs.size == 10
+        inputs = learner.policy.inputs if name == "dqn" else learner.inputs
+        assert learner.layout == "DNZPT" and inputs.size == 10
         assert 0 <= learner.act(obs, explore=True) < 2
     with pytest.raises(ValueError, match=r"shape \(1, 6\): expected \(10,\) = \[D, N, Z, P, T\]"):
         make_agent_for_env("greedy", env, rng).act(obs[:6])

@@ -2,12 +2,12 @@
 hours at the stations, targets park and wait), batched engine, real SUMO and torch.
 
 Each run is its own Python process with its own heap layout (address space randomisation is on):
-one that builds the days in-process from an empty cache, one that loads them from the warm cache,
-started from another directory with another hash seed and an unrelated allocation first, and one
-killed (``SIGKILL``) in the middle of a batch and resumed. All give the same training and
-evaluation episodes and the same network weights, to the last bit. On 897e77b (SUMO loading an
-earlier snapshot into the running simulation, ``evcd.env.simulation``) three such runs gave three
-different training results.
+one that builds the days in-process from an empty cache, and one that loads them from the warm
+cache, started from another directory with another hash seed and an unrelated allocation first.
+Both give the same training and evaluation episodes and the same network weights, to the last bit.
+On 897e77b (SUMO loading an earlier snapshot into the running simulation, ``evcd.env.simulation``)
+such runs gave different training results. A run killed in the middle of a batch and resumed gives
+the same result too: tests/scripts/test_train_script.py (``test_a_killed_run_resumes_to_the_same_result``).
 """
 
 from __future__ import annotations
@@ -16,16 +16,14 @@ import json
 import os
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import pytest
 import torch
 
 from evcd.bench.determinism import ALLOCATE_FIRST
-from evcd.utils.checkpoint import load_checkpoint
 from tests.conftest import ROOT, SCRIPTS
-from tests.scripts.test_train_script import KILL_MID_BATCH, final_weights, read_csv
+from tests.scripts.test_train_script import final_weights, read_csv
 
 #: A congested grid day: ~70 charging EVs in two hours for 3 stations of 2 points.
 BUSY = [
@@ -93,18 +91,3 @@ def test_the_same_training_from_a_warm_cache_in_another_process_is_identical(col
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "simulating a background day" not in proc.stdout + proc.stderr  # every day came from the cache
     assert_same_run(tmp_path / "warm", reference)
-
-
-def test_a_run_killed_mid_batch_resumes_to_the_same_result(cold, script_grid, tmp_path):
-    reference, cache = cold
-    out, script = tmp_path / "killed", str(SCRIPTS / "train.py")
-    kill = textwrap.dedent(KILL_MID_BATCH.format(when=70))  # in the second call of 50 episodes
-    code = (f"import os, runpy, signal, sys\n{kill}\nsys.argv = [{script!r}, *sys.argv[1:]]\n"
-            f"runpy.run_path({script!r}, run_name='__main__')\n")  # fmt: skip
-    killed = train(out, cache, script_grid, code=code, hash_seed="7")
-    assert killed.returncode == -9, killed.stderr[-3000:]
-    assert load_checkpoint(out / "checkpoints")["trainer"]["episodes_done"] == 50
-    resumed = train(out, cache, script_grid, "resume=true", hash_seed="8")
-    assert resumed.returncode == 0, resumed.stderr[-3000:]
-    assert "resuming after 50" in resumed.stdout + resumed.stderr
-    assert_same_run(out, reference)

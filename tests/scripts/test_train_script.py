@@ -414,7 +414,6 @@ def refused(small, tmp_path_factory) -> tuple[Path, list[tuple[int, str]]]:
     return root, run_refusals("train.py", cases, root)
 
 
-@pytest.mark.xdist_group("train_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
 def test_bad_values_stop_before_sumo(refused, case):
     root, runs = refused
