@@ -149,10 +149,12 @@ def test_every_folder_is_a_layer_and_the_root_holds_only_the_package_init():
         assert (PACKAGE / folder / "__init__.py").is_file(), folder
 
 
+@pytest.mark.slow
 def test_imports_run_one_way():
     assert violations(PACKAGE) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("planted", "code"),
     [
@@ -175,6 +177,7 @@ def test_no_circle_of_imports():
     assert circles(PACKAGE) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "planted",
     [

@@ -106,6 +106,7 @@ def _train(agent: DQNAgent, seed: int, episodes: range, explore: bool = True) ->
 # -- registry and switches ------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_registry_names_imply_the_switches():
     dqn = make_agent("dqn", M, np.random.default_rng(0), hidden=[8])
     ddqn = make_agent("dueling_ddqn", M, np.random.default_rng(0), hidden=[8])
@@ -156,6 +157,7 @@ def _batch(seed: int, n: int = 16):
     return rewards, next_obs, terminated
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dueling", [False, True])
 def test_double_target_by_hand(dueling):
     agent = _agent(double=True, dueling=dueling, hidden=(8, 8), gamma=0.9)
@@ -379,6 +381,7 @@ def test_explore_false_is_argmax_even_at_epsilon_one():
         np.testing.assert_array_equal(_decide(agent, obs, explore=False), greedy)
 
 
+@pytest.mark.slow
 def test_epsilon_one_is_uniform():
     agent = _agent(epsilon_start=1.0, epsilon_end=1.0)
     agent.begin_episode(np.random.default_rng(3))
@@ -454,6 +457,7 @@ def test_episode_exploration_keeps_one_random_station_per_episode():
     np.testing.assert_allclose(np.bincount(stations, minlength=M) / 600, 1 / M, atol=0.07)
 
 
+@pytest.mark.slow
 def test_episode_exploration_follows_the_network_in_a_non_exploring_episode():
     """Epsilon 0.5: about half the episodes keep one random station; the others are exactly the
     greedy sequence (which changes station here, so the two kinds cannot be confused)."""
@@ -897,6 +901,7 @@ def _continue(agent: DQNAgent) -> tuple[list, list]:
     return [r.choices for r in rows], losses
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("via", ["memory", "checkpoint"])
 @pytest.mark.parametrize(
     ("name", "exploration", "extra"),
@@ -932,6 +937,7 @@ def test_restored_agent_continues_exactly(tmp_path, via, name, exploration, extr
     assert original.learn_rng.bit_generator.state == restored.learn_rng.bit_generator.state
 
 
+@pytest.mark.slow
 def test_state_dict_is_a_snapshot():
     """A state taken mid-training and loaded only after the original went on (into two agents at
     once) still replays the original's continuation: neither the state nor the agents share tensors."""
@@ -948,6 +954,7 @@ def test_state_dict_is_a_snapshot():
     assert _equal(_params(second.policy.online), _params(original.policy.online))
 
 
+@pytest.mark.slow
 def test_a_fresh_agent_does_not_continue_like_the_trained_one():
     """The counter-test of the resume test: without the state, the same continuation differs."""
     original = _mid_training("dqn")
@@ -1153,6 +1160,7 @@ def test_a_non_dqn_checkpoint_is_refused(tmp_path):
 # -- determinism and random state -----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_same_seed_same_weights_other_seed_differs():
     def trained(seed):
         agent = make_agent("dueling_ddqn", M, np.random.default_rng(seed), **RESUME)

@@ -78,6 +78,7 @@ def _missed(result: dict) -> list[str]:
     return [name for name, met in criteria.items() if not met]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("network", ["mlp", "station"])
 @pytest.mark.parametrize("name", ["dqn", "dueling_ddqn"])
 def test_agent_learns_the_optimal_dispatch(name, network):

@@ -8,6 +8,7 @@ from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from evcd.bench.determinism import compare_runs, first_difference, run_digest, state_sha256
@@ -74,6 +75,7 @@ def test_the_evaluated_policy_of_any_learner_is_compared_by_its_recorded_digest(
     assert first_difference(run_digest(a), run_digest(b)) == "policy_sha256: aa11 vs bb22"
 
 
+@pytest.mark.slow
 def test_the_suite_trains_twice_in_fresh_processes_and_finds_them_identical(script_overrides, tmp_path):
     out = tmp_path / "determinism.json"
     tiny = [*script_overrides, "agent=dqn", "learner.hidden=[16,16]", "learner.learning_starts=4",
@@ -94,6 +96,7 @@ def test_the_suite_trains_twice_in_fresh_processes_and_finds_them_identical(scri
     assert machine["torch_threads"] == 1 and machine["packages"]["libsumo"] == version("libsumo")
 
 
+@pytest.mark.slow
 def test_overrides_are_refused_outside_the_determinism_suite(tmp_path):
     proc = run_script("bench.py", "--suite", "replay", "--out", tmp_path / "x.json", "agent=dqn")
     assert proc.returncode == 2 and "for --suite determinism only" in proc.stderr

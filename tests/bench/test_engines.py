@@ -15,6 +15,7 @@ def grid_kwargs(grid_env_dir, env_cache) -> dict:
     return {"scenario": grid_env_dir, "cache_dir": env_cache, **GRID_ENV}
 
 
+@pytest.mark.slow
 def test_compare_engines_reports_every_policy_and_batch_size(grid_kwargs):
     out = engine_bench.compare_engines(grid_kwargs, 8, [1, 4])
     names = {"greedy", "fixed0", "fixed1", "fixed2"}
@@ -31,6 +32,7 @@ def test_compare_engines_reports_every_policy_and_batch_size(grid_kwargs):
     assert out["summary"]["1"]["greedy"]["identical_share"] >= 0.75
 
 
+@pytest.mark.slow
 def test_rates_and_scaling_are_measured(grid_kwargs):
     rates = engine_bench.engine_rates(grid_kwargs, 2, 6, 3)
     assert rates["single"]["episodes"] == 2 and rates["batched"]["episodes"] == 6

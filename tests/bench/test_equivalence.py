@@ -5,8 +5,12 @@ from __future__ import annotations
 import itertools
 import logging
 
+import pytest
+
 from evcd.bench.equivalence import compare_protocols
 from tests.conftest import GRID_ENV, PAPER_DAY_END, run_episode
+
+pytestmark = pytest.mark.slow  # every test here takes seconds
 
 #: |T_fast - T_paper| allowed (s). SUMO does not restore a state bit for bit; on this grid we measured
 #: mean 0.4 s, max 2 s over 12 greedy episodes (most identical).

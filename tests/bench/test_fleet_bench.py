@@ -8,6 +8,8 @@ from evcd.agents.dqn import DQNConfig
 from evcd.bench.fleet import fleet_learning_rate, fleet_overhead
 from tests.conftest import FLEET_DEMAND, FLEET_WINDOW
 
+pytestmark = pytest.mark.slow  # every test here takes seconds
+
 
 def test_fleet_overhead_and_learning_rate_on_the_grid(grid_env_dir, env_cache, one_torch_thread) -> None:
     kwargs = {"scenario": grid_env_dir, "cache_dir": env_cache, "demand": FLEET_DEMAND,

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from evcd.bench.perturbed import perturbed_build_cost
 from tests.conftest import GRID_ENV
+
+pytestmark = pytest.mark.slow  # every test here takes seconds
 
 
 def test_the_perturbed_suite_builds_both_days_in_turns(grid_env_dir, env_cache) -> None:

@@ -5,9 +5,13 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
+
 from evcd.bench.protocols import run_bench
 from evcd.scenario.demand import DemandConfig
 from tests.conftest import make_grid_scenario, run_script
+
+pytestmark = pytest.mark.slow  # every test here takes seconds
 
 SMALL = DemandConfig(cars_per_day=1500, evs=150, min_trip_m=500.0, charging_share=0.5)
 

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from evcd.bench.vector import sweep_benchmark
 from tests.conftest import GRID_ENV
+
+pytestmark = pytest.mark.slow  # every test here takes seconds
 
 
 def test_the_vector_suite_measures_speed_and_equivalence_in_one_run(grid_env_dir, env_cache) -> None:

@@ -70,6 +70,7 @@ def both(make, agent_factory, specs, batch_episodes=8, **env_kwargs):
 
 
 # ------------------------------------------------------------------------------- plans and equivalence
+@pytest.mark.slow
 def test_engines_play_the_same_episode_plans(make_env):
     specs = episode_specs(3, range(12))
     env = make_env(demand_seeds=(0, 1))
@@ -89,6 +90,7 @@ def test_engines_play_the_same_episode_plans(make_env):
         assert [plans[i][1].departure for i in batch] == sorted(plans[i][1].departure for i in batch)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("policy", ["greedy", 0, 1, 2])
 def test_batched_engine_matches_single_environment_per_seed(make_env, policy):
     specs = episode_specs(0, range(40))
@@ -200,6 +202,7 @@ def tiny_dqn(env) -> DQNAgent:
                              buffer_size=100, exploration_steps=50, double=True, dueling=True)  # fmt: skip
 
 
+@pytest.mark.slow
 def test_batched_learning_is_deterministic(make_env):
     specs = episode_specs(5, range(16))
     results = []
@@ -246,6 +249,7 @@ def test_decide_on_many_episodes_equals_act_on_each(make_env):
         assert batched.tolist() == one_by_one
 
 
+@pytest.mark.slow
 def test_sumo_failure_truncates_the_batch_in_flight_and_the_next_batch_runs(make_env, monkeypatch):
     specs = episode_specs(1, range(12))
     runner = BatchedRunner(make_env(), batch_episodes=6)

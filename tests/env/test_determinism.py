@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tests.conftest import WINDOW, run_episode
 
@@ -39,6 +40,7 @@ def test_unseeded_resets_continue_the_generator(make_env):
     assert second == again
 
 
+@pytest.mark.slow
 def test_different_seeds_different_departures(make_env):
     env = make_env()
     infos = [env.reset(seed=s)[1] for s in range(6)]
@@ -47,6 +49,7 @@ def test_different_seeds_different_departures(make_env):
     assert len({i["origin"] for i in infos}) > 1
 
 
+@pytest.mark.slow
 def test_days_are_drawn_from_demand_seeds(make_env):
     env = make_env(demand_seeds=[0, 1])
     days = {env.reset(seed=s)[1]["day"] for s in range(8)}

@@ -17,6 +17,7 @@ from evcd.sim.driver import SumoDriver
 from tests.conftest import GRID_ENV, run_episode
 
 
+@pytest.mark.slow
 def test_check_env_passes_on_the_grid(grid_env_dir, env_cache):
     env = gymnasium.make(ENV_ID, scenario=grid_env_dir, cache_dir=env_cache, **GRID_ENV)
     try:

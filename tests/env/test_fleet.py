@@ -67,12 +67,14 @@ def test_charging_trips_are_read_from_the_route_file_and_drawn_per_share(small_s
 
 
 # ------------------------------------------------------------------------------------ the API
+@pytest.mark.slow
 def test_parallel_api_test_passes(make_fleet) -> None:
     env = make_fleet(guided_share=0.5)
     parallel_api_test(env, num_cycles=400)
     assert env.observation_space(env.possible_agents[0]).shape == (4 * len(env.stations),)
 
 
+@pytest.mark.slow
 def test_the_aec_form_passes_pettingzoos_api_test_and_plays_the_parallel_episodes(
     make_fleet, grid_env_dir, env_cache
 ) -> None:
@@ -94,6 +96,7 @@ def test_the_aec_form_passes_pettingzoos_api_test_and_plays_the_parallel_episode
     assert aec_outcomes == nearest["outcomes"] and len(aec_outcomes) > 1
 
 
+@pytest.mark.slow
 def test_possible_agents_are_known_without_generating_a_day(make_fleet, tmp_path) -> None:
     env = make_fleet(guided_share=0.5, cache_dir=tmp_path / "fresh")
     agents = env.possible_agents
@@ -160,6 +163,7 @@ def test_two_guided_evs_sent_to_a_one_point_station_charge_one_after_the_other(m
         assert info["switches"] == 1
 
 
+@pytest.mark.slow
 def test_an_ev_sent_elsewhere_while_crossing_a_junction_still_charges_there(make_fleet) -> None:
     """At a tick, every guided EV found on a junction (an internal edge) is sent to another station:
     each of them must start charging there. (SUMO's rerouteParkingArea from inside a junction could
@@ -222,6 +226,7 @@ def test_h_counts_the_other_guided_evs_heading_to_each_station(make_small_fleet)
 
 
 # ------------------------------------------------------------------------------------ reproducibility
+@pytest.mark.slow
 def test_same_seed_same_episode_and_the_share_draws_the_guided(make_fleet) -> None:
     env = make_fleet(guided_share=0.5)
     a = play(env, 3, greedy)
@@ -234,6 +239,7 @@ def test_same_seed_same_episode_and_the_share_draws_the_guided(make_fleet) -> No
     assert len(a["outcomes"]) == round(0.5 * n)
 
 
+@pytest.mark.slow
 def test_the_background_rule_reproduces_the_plain_day(make_fleet) -> None:
     env = make_fleet(guided_share=1.0)
     out = play(env, 0, own_station)
@@ -253,6 +259,7 @@ def test_the_background_rule_reproduces_the_plain_day(make_fleet) -> None:
     assert plain == fleet
 
 
+@pytest.mark.slow
 def test_the_fleet_plays_its_days_outages(make_fleet):
     """``perturbations`` reaches the fleet's world like the single environment's: each day its own
     outages, in force in the controller once an episode of that day began."""

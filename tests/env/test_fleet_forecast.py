@@ -4,6 +4,7 @@ forecaster's count at its own arrival, after ``H``; the forecast rule dispatches
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from evcd.agents import make_agent_for_env
 from evcd.env.observation import FORECAST_HORIZON_S
@@ -37,6 +38,7 @@ def test_each_agents_forecast_is_the_trend_at_its_own_arrival(make_fleet):
     assert checked >= 10 and differ
 
 
+@pytest.mark.slow
 def test_the_forecast_rule_dispatches_a_fleet(make_fleet):
     env = make_fleet(observe=["forecast"], forecaster="trend")
     agent = make_agent_for_env("queue_forecast", env, np.random.default_rng(0))

@@ -50,6 +50,7 @@ def test_g_counts_the_guided_evs_due_before_this_one(make_small_fleet):
     assert obs["near"][8:].tolist() == [0.5, 0.0] and obs["far"][8:].tolist() == [0.0, 1.0]
 
 
+@pytest.mark.slow
 def test_g_is_the_part_of_h_due_first_along_whole_episodes(make_fleet):
     """On the 8 x 8 grid's fleet, every agent's ``G`` at every tick is, per station, the other agents
     driving there whose ``T`` to it is below this one's ``T`` there; never above ``H``, below it at

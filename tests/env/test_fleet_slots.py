@@ -18,6 +18,7 @@ def _choice(obs: np.ndarray) -> int:
     return int(np.argmin(obs[m : 2 * m]))
 
 
+@pytest.mark.slow
 def test_parallel_api_test_passes(make_fleet):
     env = FleetSlots(make_fleet(), slots=40)
     try:
@@ -26,6 +27,7 @@ def test_parallel_api_test_passes(make_fleet):
         env.close()
 
 
+@pytest.mark.slow
 def test_the_slots_play_the_fleets_episode_decision_for_decision(make_fleet):
     """The same rule through the slots and on the fleet directly: every EV's travel time equal; every
     slot present in every step; an EV keeps its slot; inactive slots are zeros with reward 0."""

@@ -44,6 +44,7 @@ def test_the_oracle_forecasts_the_played_days_own_occupancy_at_arrival(make_env)
         np.testing.assert_array_equal(timeline.at(now), env.last_observation.occupancy)
 
 
+@pytest.mark.slow
 def test_the_history_learns_from_the_forecast_days_only(make_env, env_cache):
     """F is the history forecaster fitted on the forecast days' timelines (days 3 and 4, not the
     played day 0), evaluated at each arrival; normalised, F is in multiples of the points."""

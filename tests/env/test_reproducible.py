@@ -54,6 +54,7 @@ def test_a_load_restarts_sumo_only_when_it_goes_back_in_time():
     assert not needs_restart(now=1400.0, snapshot_time=1500.0)  # forward
 
 
+@pytest.mark.slow
 def test_going_back_in_time_replays_the_day_of_a_fresh_sumo(busy_sim):
     sim = busy_sim
     sim.start_at(0, 1250.0)  # the snapshot at 1200
@@ -70,6 +71,7 @@ def test_going_back_in_time_replays_the_day_of_a_fresh_sumo(busy_sim):
     assert len(parked) >= 10  # the day is busy: EVs park and queue at the stations
 
 
+@pytest.mark.slow
 def test_a_load_going_forward_keeps_sumo_and_replays_the_day_of_a_fresh_sumo(busy_sim):
     sim = busy_sim
     sim.start_at(0, 1250.0)

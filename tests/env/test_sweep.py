@@ -33,6 +33,7 @@ def _play(vec, policy, steps):
     return out
 
 
+@pytest.mark.slow
 def test_vector_conventions_and_same_step_autoreset(make_env) -> None:
     env = make_env(**WORLD)
     vec = SweepVectorEnv(env, 4)
@@ -63,6 +64,7 @@ def test_vector_conventions_and_same_step_autoreset(make_env) -> None:
     assert SumoDriver.active() is None
 
 
+@pytest.mark.slow
 def test_one_seed_one_sweep(make_env) -> None:
     runs = []
     for _ in range(2):
@@ -109,6 +111,7 @@ def test_bad_actions_are_refused_by_sub_environment_and_change_nothing(make_env)
         SweepVectorEnv(make_env(protocol="paper"), 2)
 
 
+@pytest.mark.slow
 def test_the_window_end_truncates_every_running_episode_and_a_new_sweep_starts(make_env) -> None:
     env = make_env(**WORLD)
     lo, hi = env.config.departure_window
@@ -132,6 +135,7 @@ def test_the_window_end_truncates_every_running_episode_and_a_new_sweep_starts(m
         vec.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("num_envs", [1, 4])
 def test_sweep_episodes_replayed_alone_in_the_single_environment(make_env, num_envs) -> None:
     """What the one clock and the co-simulated targets change: a rule's travel times of the sweep's
@@ -148,6 +152,7 @@ def test_sweep_episodes_replayed_alone_in_the_single_environment(make_env, num_e
     assert diff.mean() <= 0.02 * pairs[:, 1].mean() + 1.0, diff
 
 
+@pytest.mark.slow
 def test_stable_baselines3_learns_through_the_adapter(make_env) -> None:
     from stable_baselines3 import PPO
 
@@ -171,6 +176,7 @@ def test_stable_baselines3_learns_through_the_adapter(make_env) -> None:
         venv.close()
 
 
+@pytest.mark.slow
 def test_only_the_latest_episodes_are_kept(make_env) -> None:
     env = make_env(**WORLD)
     vec = SweepVectorEnv(env, 3, keep_episodes=5)

@@ -10,6 +10,7 @@ from evcd.sim.driver import SumoDriver
 from tests.conftest import GRID_ENV
 
 
+@pytest.mark.slow
 def test_two_workers_step_independently(grid_env_dir, env_cache):
     envs = make_vector_env(2, scenario=grid_env_dir, cache_dir=env_cache, **GRID_ENV)
     try:

@@ -5,10 +5,12 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pytest
 
 from tests.conftest import run_script
 
 
+@pytest.mark.slow
 def test_the_gymnasium_loop_plays_both_splits(script_overrides) -> None:
     overrides = [a for o in script_overrides for a in ("--override", o)]
     proc = run_script("../examples/gymnasium_loop.py", "--episodes", "2", *overrides)
@@ -30,6 +32,7 @@ def test_the_examples_rule_takes_the_fewest_vehicles_per_point_then_the_nearest(
     assert fewest_per_point(obs, 3) == 0
 
 
+@pytest.mark.slow
 def test_stable_baselines3_ppo_trains_and_is_evaluated_beside_the_rule(script_overrides) -> None:
     overrides = [a for o in script_overrides for a in ("--override", o)]
     tiny = ["--timesteps", "32", "--n-steps", "16", "--envs", "2", "--episodes", "2"]
@@ -43,6 +46,7 @@ def test_stable_baselines3_ppo_trains_and_is_evaluated_beside_the_rule(script_ov
     assert all(0 < float(v) < 7200 for v in held_out.groups())
 
 
+@pytest.mark.slow
 def test_torchrl_trains_a_shared_policy_on_the_fleet(script_overrides) -> None:
     """TorchRL's PPO on the fleet's slot view (grid world): every batch has EV decisions, trips end with
     a travel time, and the shared policy's weights change."""

@@ -43,6 +43,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_every_experiment_composes_and_each_split_has_its_days() -> None:
     assert {"peak", "table", "paper", "fleet"} <= set(experiment_names())
     for name in experiment_names():
@@ -58,6 +59,7 @@ def test_every_experiment_composes_and_each_split_has_its_days() -> None:
     assert split_days(fleet, "eval", seed=1) == (111, 112, 113, 114, 115)
 
 
+@pytest.mark.slow
 def test_the_readme_world_from_gymnasium(tmp_path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)  # the shipped scenario is found from any working directory
     env = gymnasium.make(ENV_ID, experiment="peak", split="train", cache_dir=tmp_path)  # no SUMO yet
@@ -97,6 +99,7 @@ def test_a_single_target_experiment_is_not_a_fleet() -> None:
         parallel_env(experiment="peak")
 
 
+@pytest.mark.slow
 def test_gymnasium_plays_the_episodes_of_the_scripts_evaluation(script_overrides, tmp_path) -> None:
     """``split="eval"`` of run seed 2 is the evaluation ``train.py experiment=peak seed=2`` plays: a
     rule's travel times equal, episode by episode (the script on the single environment, as a
@@ -129,6 +132,7 @@ def test_gymnasium_plays_the_episodes_of_the_scripts_evaluation(script_overrides
         env.close()
 
 
+@pytest.mark.slow
 def test_the_fleet_experiment_plays_the_scripts_evaluation_episodes(script_overrides, tmp_path) -> None:
     run = tmp_path / "run"
     proc = run_script("train.py", *script_overrides, *FLEET, "agent=queue_aware", "eval.episodes=2",
@@ -152,6 +156,7 @@ def test_the_fleet_experiment_plays_the_scripts_evaluation_episodes(script_overr
     )
 
 
+@pytest.mark.slow
 def test_the_subprocess_vector_env_takes_an_experiment(script_overrides) -> None:
     envs = make_vector_env(2, experiment="peak", split="eval", overrides=script_overrides)
     try:

@@ -109,6 +109,7 @@ def selected(tmp_path_factory):
     return run_dir, agent, result
 
 
+@pytest.mark.slow
 def test_a_run_with_select_best_evaluates_its_best_validated_policy(selected, trained):  # noqa: F811
     run_dir, agent, result = selected
     data = json.loads((run_dir / RESULTS_JSON).read_text())
@@ -132,6 +133,7 @@ def test_a_run_with_select_best_evaluates_its_best_validated_policy(selected, tr
     assert best["episodes_done"] < 30 and not _same(last, _weights(fresh))
 
 
+@pytest.mark.slow
 def test_a_fleet_run_with_select_best_evaluates_the_kept_policy(make_small_fleet, tmp_path, one_torch_thread):
     env = make_small_fleet(TWO_EVS, max_travel_time=900.0)
     fleet = Fleet(train=env, eval=env, validation=env)

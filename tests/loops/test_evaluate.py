@@ -53,6 +53,7 @@ def rows_without_wall(result: EvalResult) -> list[dict]:
 
 
 # ---------------------------------------------------------------------------------------- the loop
+@pytest.mark.slow
 def test_same_seed_same_rows_other_seed_other_rows(make_env):
     env = make_env()
     agent = make_agent("random", env.action_space.n, np.random.default_rng(0))
@@ -89,6 +90,7 @@ def test_rows_describe_the_episodes(make_env):
     assert s.ci_low <= s.mean_travel_time <= s.ci_high
 
 
+@pytest.mark.slow
 def test_an_episode_depends_only_on_run_seed_and_index(make_env):
     env = make_env()
     agent = make_agent("random", 3, np.random.default_rng(0))

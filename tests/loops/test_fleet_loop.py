@@ -117,6 +117,7 @@ SPLIT_LEARNERS = {
 }  # fmt: skip
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("learner", ["dueling_ddqn", "ppo"])
 def test_the_shared_learner_finds_the_best_split_of_two_evs(
     make_small_fleet, one_torch_thread, learner: str

@@ -83,6 +83,7 @@ def _csv(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_a_fleet_run_writes_its_files_and_pairs_every_rule_on_the_same_episodes(
     fleet, tmp_path, one_torch_thread, caplog
 ) -> None:
@@ -165,6 +166,7 @@ def test_a_fleet_run_writes_its_files_and_pairs_every_rule_on_the_same_episodes(
         train_and_evaluate(_agent(env), fleet, _settings(), run, resume=True)
 
 
+@pytest.mark.slow
 def test_the_validation_does_not_change_the_weights(fleet, tmp_path, one_torch_thread) -> None:
     env = fleet["train"]
     with_it, without = _agent(env), _agent(env)
@@ -178,6 +180,7 @@ def test_the_validation_does_not_change_the_weights(fleet, tmp_path, one_torch_t
     assert [r["guided_travel"] for r in a] == [r["guided_travel"] for r in b]
 
 
+@pytest.mark.slow
 def test_an_interrupted_fleet_run_resumes_to_the_weights_of_an_uninterrupted_one(
     fleet, tmp_path, one_torch_thread
 ) -> None:

@@ -75,6 +75,7 @@ def test_hindsight_is_a_bound_played_by_the_loops_not_an_agent(env):
 
 
 # ---------------------------------------------------------------------------------------- real SUMO
+@pytest.mark.slow
 @pytest.mark.parametrize("engine", ["single", "batched"])
 def test_hindsight_is_never_worse_than_any_fixed_station(env, engine):
     n, episodes, seed = env.action_space.n, 8, 21
@@ -104,6 +105,7 @@ def test_hindsight_is_never_worse_than_any_fixed_station(env, engine):
     assert out["hindsight"] == report and out["summary"]["mean_travel_time"] <= min(report["mean_by_station"])
 
 
+@pytest.mark.slow
 def test_hindsight_through_the_training_script(script_overrides, tmp_path):
     out = tmp_path / "run"
     proc = run_script("train.py", *script_overrides, "eval.episodes=3", "eval.bootstrap_resamples=200",

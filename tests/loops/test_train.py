@@ -132,6 +132,7 @@ def trained(tmp_path_factory):
     return run_dir, agent, result
 
 
+@pytest.mark.slow
 def test_a_run_writes_every_file(trained):
     run_dir, _agent, _result = trained
     for name in ("train_episodes.csv", "episodes.csv", "baseline_greedy_episodes.csv", "results.json",
@@ -226,6 +227,7 @@ def _without_wall(rows: list[dict[str, str]]) -> list[dict[str, str]]:
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stop_after", [5, 10, 17, 30])
 def test_an_interrupted_run_resumes_to_the_same_weights_and_results(trained, tmp_path, stop_after):
     ref_dir, ref_agent, ref = trained
@@ -254,6 +256,7 @@ def test_an_interrupted_run_resumes_to_the_same_weights_and_results(trained, tmp
     assert result.training["sessions"] == 2 and result.training["episodes_done"] == 30
 
 
+@pytest.mark.slow
 def test_resume_with_other_settings_is_refused(trained, tmp_path):
     run_dir = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
@@ -337,6 +340,7 @@ def plot_curves(*args: str) -> subprocess.CompletedProcess:
     return run_script("plot_curves.py", *args, timeout=120)
 
 
+@pytest.mark.slow
 def test_plot_curves_overlays_runs_and_csv_files(trained, tmp_path):
     run_dir, _, _ = trained
     out = tmp_path / "curves.png"
@@ -378,6 +382,7 @@ def validated(tmp_path_factory, trained):
     return run_dir, agent, result
 
 
+@pytest.mark.slow
 def test_the_periodic_validation_does_not_touch_training(trained, validated):
     """A run with validations trains to exactly the weights, rows and evaluation of one without."""
     (plain_dir, plain, plain_result), (run_dir, agent, result) = trained, validated
@@ -394,6 +399,7 @@ def test_the_periodic_validation_does_not_touch_training(trained, validated):
     ]
 
 
+@pytest.mark.slow
 def test_the_validation_plays_the_same_held_out_episodes_beside_the_rules(validated):
     run_dir, _agent, result = validated
     data = json.loads((run_dir / RESULTS_JSON).read_text())["validation"]
@@ -422,6 +428,7 @@ def test_the_validation_plays_the_same_held_out_episodes_beside_the_rules(valida
     assert result.training["validation_s"] > 0
 
 
+@pytest.mark.slow
 def test_a_resumed_run_keeps_its_validation_curve(validated, tmp_path):
     run_dir, _agent, _result = validated
     stopped = tmp_path / "run"

@@ -205,6 +205,7 @@ def test_two_jobs_of_one_cell_are_refused(tmp_path) -> None:
         make_fleet_table([a, b], tmp_path / "out")
 
 
+@pytest.mark.slow
 def test_make_table_fleet_on_the_command_line(tmp_path) -> None:
     sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware", "dueling_ddqn"))
     proc = run_script("make_table.py", "--fleet", str(sweep), "--out", str(tmp_path / "out"), timeout=300)
@@ -216,6 +217,7 @@ def test_make_table_fleet_on_the_command_line(tmp_path) -> None:
     assert "allow-incomplete" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_validation_curves_per_cell_pair_each_seed_with_queue_aware(tmp_path) -> None:
     sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware", "dqn"))
     for job in sweep.glob("*_dqn_*"):

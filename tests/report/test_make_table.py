@@ -222,6 +222,7 @@ def test_collect_reads_every_job(sweep):
 
 
 # ---------------------------------------------------------------------------------------- the outputs
+@pytest.mark.slow
 def test_csv_rows_and_order(sweep, run_table, tmp_path):
     out = run_table(sweep)
     with open(tmp_path / "out" / CSV_NAME, newline="") as f:
@@ -361,6 +362,7 @@ def test_duplicate_jobs_and_non_run_directories_are_refused(sweep, tmp_path):
         collect([tmp_path / "empty"])
 
 
+@pytest.mark.slow
 def test_refuses_to_overwrite(sweep, run_table, tmp_path):
     run_table(sweep)
     md = tmp_path / "out" / MD_NAME
@@ -402,6 +404,7 @@ def make_table_script(*args: object) -> subprocess.CompletedProcess[str]:
     return run_script("make_table.py", *map(str, args), "--resamples", "500", timeout=300)
 
 
+@pytest.mark.slow
 def test_script_exit_codes(tmp_path):
     agents = ("greedy", "hindsight", "dqn")
     sweep = write_sweep(tmp_path / "multirun", agents=agents, evs=(200,), seeds=(0, 1))

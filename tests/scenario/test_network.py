@@ -438,6 +438,7 @@ def test_script_builds_and_summarises(tiny_graphml, tmp_path):
     assert (tmp_path / "net.net.xml.gz").is_file()
 
 
+@pytest.mark.slow
 def test_script_refuses_to_replace_a_scenario_network_without_force(tiny_graphml, tmp_path):
     scenario = tmp_path / "scenario"
     assert run_script("--graphml", str(tiny_graphml), "--out", str(scenario)).returncode == 0

@@ -93,6 +93,7 @@ def damage(scenario: Path, how: str) -> Path:
     return net
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["truncated", "broken-xml"])
 def test_a_damaged_network_is_named_not_a_traceback(scenario_copy, tmp_path, how):
     net = damage(scenario_copy, how)

@@ -72,6 +72,7 @@ def test_road_events_are_in_the_days_key_and_checked_against_the_network(grid):
         DaySpec(grid, demand, 5, roads=RoadEvents(roadworks=(RoadWork(edge, lanes=(0, 1)),)))
 
 
+@pytest.mark.slow
 def test_an_environment_plays_its_days_road_events(grid, tmp_path):
     """Each day its own events; an episode starting during an incident and rain finds the incident's
     lanes closed and slowed and the other lanes at the rain's speed, the other day's incident edges

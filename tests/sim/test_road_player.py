@@ -6,11 +6,14 @@ import multiprocessing
 from typing import Any
 
 import libsumo
+import pytest
 
 from evcd.scenario.scenario import load_scenario
 from evcd.sim.road_events import Incident, RoadEvents
 from evcd.sim.road_player import RoadPlayer
 from tests.conftest import make_grid_scenario
+
+pytestmark = pytest.mark.slow  # every test here takes seconds
 
 
 def _incident_with_a_stop_off_the_route(root: str) -> dict[str, Any]:

@@ -199,6 +199,7 @@ def _ensure_in_child(root: str, cache_dir: str) -> list[float]:
     return cache.built_times
 
 
+@pytest.mark.slow
 def test_parallel_processes_build_a_day_once(small_scenario, tmp_path):
     ctx = multiprocessing.get_context("spawn")
     with ctx.Pool(2) as pool:
