@@ -20,7 +20,7 @@ from evcd.experiments.worlds import demand_config, env_kwargs, fleet_kwargs
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.loops.run_files import CSV_FIELDS
 from evcd.scenario.demand import DemandConfig
-from tests.conftest import CONF, compose_config, run_script
+from tests.conftest import CONF, compose_config, run_refusals, run_script
 
 #: A fleet on the script grid: enough charging EVs departing 06:00-07:00 to guide.
 FLEET = ["task=fleet", "evs=300", "scenario.demand.charging_share=0.6", "env.departure_window=[21600,25200]",
@@ -130,22 +130,56 @@ def test_a_sweep_writes_one_run_dir_per_job(small, tmp_path):
         assert (sweep / job / "episodes.csv").is_file()
 
 
-@pytest.mark.parametrize(
-    "override,needle",
-    [
-        ("episodes=0", "episodes=0"),
-        ("agent.name=dqnn", "dqnn"),
-        ("evs=-1", "evs=-1"),
-        ("evs=1.5", "evs=1.5"),
-        ("env.protocol=slow", "protocol='slow'"),
-    ],
-)
-def test_bad_values_stop_before_sumo(small, tmp_path, override, needle):
-    out = tmp_path / "run"
-    proc = run_evaluate(*small, override, f"hydra.run.dir={out}")
-    assert proc.returncode == 2, proc.stderr[-2000:]
-    log = proc.stdout + proc.stderr
-    assert needle in log
+#: Settings evaluate.py refuses before SUMO starts, and what its message says.
+BAD_VALUES = [
+    ("episodes=0", "episodes=0"),
+    ("agent.name=dqnn", "dqnn"),
+    ("evs=-1", "evs=-1"),
+    ("evs=1.5", "evs=1.5"),
+    ("env.protocol=slow", "protocol='slow'"),
+]
+#: Settings of task=fleet (over :data:`FLEET`) evaluate.py refuses before SUMO starts, and its message.
+BAD_FLEET = [
+    (["fleet.guided_share=0"], "guided_share=0"),
+    (["fleet.guided_share=1.5"], "guided_share=1.5"),
+    (["agent=hindsight"], "agent 'hindsight' is not an agent of task=fleet"),
+    (["agent=dueling_ddqn"], "agent 'dueling_ddqn' learns: give the trained policy"),
+    (["agent=dqn", "agent.checkpoint=nowhere"], "nowhere"),
+    (["env.protocol=paper"], "env.protocol=paper is for the single target"),
+    (["env.departure_window=[3600,3660]"], "nothing to guide"),
+]
+#: A fleet rule on the single task, refused: evaluate.py's message.
+CENTRAL_ON_SINGLE = "agent 'central' reads the fleet's observation [D, N, Z, H]: use it with task=fleet"
+
+#: A refused run: its run directory, exit code and output.
+Refusal = tuple[Path, int, str]
+
+
+@pytest.fixture(scope="module")
+def refused(small: list[str], tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Refusal]]:
+    """Every case of :data:`BAD_VALUES` and :data:`BAD_FLEET`, and agent=central on the single task, run
+    by evaluate.py in one process (:func:`run_refusals`), each into its own run directory."""
+    root = tmp_path_factory.mktemp("refused")
+    groups = {
+        "single": [[*small, override] for override, _ in BAD_VALUES],
+        "fleet": [[*small, *FLEET, *overrides] for overrides, _ in BAD_FLEET],
+        "central": [[*small, "agent=central"]],
+    }
+    cases = [(name, case) for name, group in groups.items() for case in group]
+    runs = run_refusals("evaluate.py", [[*case, f"hydra.run.dir={root / f'run{i}'}"]
+                                        for i, (_, case) in enumerate(cases)], root)  # fmt: skip
+    out: dict[str, list[Refusal]] = {name: [] for name in groups}
+    for i, ((name, _), (code, log)) in enumerate(zip(cases, runs, strict=True)):
+        out[name].append((root / f"run{i}", code, log))
+    return out
+
+
+@pytest.mark.xdist_group("evaluate_refusals")
+@pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
+def test_bad_values_stop_before_sumo(refused, case):
+    out, code, log = refused["single"][case]
+    assert code == 2, log[-2000:]
+    assert BAD_VALUES[case][1] in log
     assert "simulating the day" not in log and not (out / "results.json").exists()
 
 
@@ -198,31 +232,17 @@ def test_evaluate_a_fleet_end_to_end(small, tmp_path):
     assert "guided EVs" in proc.stdout + proc.stderr
 
 
-@pytest.mark.parametrize(
-    "overrides,needle",
-    [
-        (["fleet.guided_share=0"], "guided_share=0"),
-        (["fleet.guided_share=1.5"], "guided_share=1.5"),
-        (["agent=hindsight"], "agent 'hindsight' is not an agent of task=fleet"),
-        (["agent=dueling_ddqn"], "agent 'dueling_ddqn' learns: give the trained policy"),
-        (["agent=dqn", "agent.checkpoint=nowhere"], "nowhere"),
-        (["env.protocol=paper"], "env.protocol=paper is for the single target"),
-        (["env.departure_window=[3600,3660]"], "nothing to guide"),
-    ],
-)
-def test_bad_fleet_settings_stop_before_sumo(small, tmp_path, overrides, needle):
-    out = tmp_path / "run"
-    proc = run_evaluate(*small, *FLEET, *overrides, f"hydra.run.dir={out}")
-    assert proc.returncode == 2, proc.stderr[-2000:]
-    log = proc.stdout + proc.stderr
-    assert needle in log
+@pytest.mark.xdist_group("evaluate_refusals")
+@pytest.mark.parametrize("case", range(len(BAD_FLEET)), ids=[" ".join(o) for o, _ in BAD_FLEET])
+def test_bad_fleet_settings_stop_before_sumo(refused, case):
+    out, code, log = refused["fleet"][case]
+    assert code == 2, log[-2000:]
+    assert BAD_FLEET[case][1] in log
     assert "simulating the day" not in log and not (out / "results.json").exists()
 
 
-def test_a_fleet_rule_on_the_single_task_is_refused(small, tmp_path):
-    proc = run_evaluate(*small, "agent=central", f"hydra.run.dir={tmp_path / 'run'}")
-    assert proc.returncode == 2
-    assert (
-        "agent 'central' reads the fleet's observation [D, N, Z, H]: use it with task=fleet"
-        in proc.stdout + proc.stderr
-    )
+@pytest.mark.xdist_group("evaluate_refusals")
+def test_a_fleet_rule_on_the_single_task_is_refused(refused):
+    ((_, code, log),) = refused["central"]
+    assert code == 2
+    assert CENTRAL_ON_SINGLE in log

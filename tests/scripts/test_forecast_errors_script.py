@@ -5,8 +5,31 @@ settings, bad settings refused."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
-from tests.conftest import run_script
+import pytest
+
+from tests.conftest import run_refusals, run_script
+
+#: Settings forecast_errors.py (comparing the sessions forecaster) refuses, and what its message says.
+BAD_SETTINGS = [
+    ("+forecast.settings.sessions.statistic=mode", "statistic='mode': must be one of median, mean"),
+    ("+forecast.settings.trend.window_s=60", "settings go to the forecasters compared, ['sessions']"),
+    ("forecast.split=train", "forecast.split='train': must be one of eval, tuning"),
+]
+
+
+@pytest.fixture(scope="module")
+def refused(
+    script_overrides: list[str], tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, list[tuple[int, str]]]:
+    """Every case of :data:`BAD_SETTINGS` run by forecast_errors.py in one process (:func:`run_refusals`),
+    each into its own run directory."""
+    root = tmp_path_factory.mktemp("refused")
+    sessions = [*script_overrides, "forecast.forecasters=[sessions]"]
+    cases = [[*sessions, override, f"hydra.run.dir={root / f'bad{i}'}"]
+             for i, (override, _) in enumerate(BAD_SETTINGS)]  # fmt: skip
+    return root, run_refusals("forecast_errors.py", cases, root)
 
 
 def test_the_forecasters_errors_on_the_held_out_days(script_overrides, tmp_path):
@@ -30,7 +53,10 @@ def test_the_forecasters_errors_on_the_held_out_days(script_overrides, tmp_path)
     assert "choose among history, trend, anomaly, sessions, oracle" in proc.stdout + proc.stderr
 
 
-def test_the_tuning_days_with_a_forecasters_settings_and_bad_settings_refused(script_overrides, tmp_path):
+@pytest.mark.xdist_group("forecast_errors_refusals")
+def test_the_tuning_days_with_a_forecasters_settings_and_bad_settings_refused(
+    script_overrides, refused, tmp_path
+):
     out = tmp_path / "tuning"
     proc = run_script("forecast_errors.py", *script_overrides, "days.train=[0,3]", "days.tuning=[2]",
                       "forecast.split=tuning", "forecast.forecasters=[sessions]",
@@ -42,12 +68,7 @@ def test_the_tuning_days_with_a_forecasters_settings_and_bad_settings_refused(sc
     assert data["settings"] == {"sessions": {"history_weight": 0.25}}
     assert set(data["rows"]) == {"now", "sessions"} and data["rows"]["sessions"]
     assert "Tuning days [2]" in (out / "forecast_errors.md").read_text()
-    for override, message in [
-        ("+forecast.settings.sessions.statistic=mode", "statistic='mode': must be one of median, mean"),
-        ("+forecast.settings.trend.window_s=60", "settings go to the forecasters compared, ['sessions']"),
-        ("forecast.split=train", "forecast.split='train': must be one of eval, tuning"),
-    ]:
-        proc = run_script("forecast_errors.py", *script_overrides, "forecast.forecasters=[sessions]",
-                          override, f"hydra.run.dir={tmp_path / 'bad'}")  # fmt: skip
-        assert proc.returncode == 2 and message in proc.stdout + proc.stderr, (override, proc.stderr[-2000:])
-        assert not (tmp_path / "bad" / "forecast_errors.json").exists()
+    root, runs = refused  # the bad settings, batched
+    for case, ((override, message), (code, log)) in enumerate(zip(BAD_SETTINGS, runs, strict=True)):
+        assert code == 2 and message in log, (override, log[-2000:])
+        assert not (root / f"bad{case}" / "forecast_errors.json").exists()

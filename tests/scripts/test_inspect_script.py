@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from evcd.scenario.demand import DemandConfig
-from tests.conftest import ROOT, compose_config, run_script
+from tests.conftest import ROOT, compose_config, run_refusals, run_script
 
 
 def run_inspect(*overrides: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
@@ -94,22 +94,46 @@ def test_inspect_a_perturbed_morning_plays_and_draws_its_events(scenario_dir, tm
     assert not (runs["calm"][0] / "day_events.png").exists()
 
 
-@pytest.mark.parametrize(
-    "override,needle",
-    [
-        ("evs=-1", "evs=-1"),
-        ("scenario.charging_points=0", "charging_points=0"),
-        ("begin=90000", "begin=90000"),
-        ("scenario.path=/no/such/folder", "/no/such/folder"),
-        ("+perturbations.rain={hours: [0, 30]}", "perturbations.rain.hours=[0, 30]"),
-    ],
-)
-def test_bad_values_stop_before_sumo(scenario_dir, tmp_path, override, needle):
+#: Settings inspect_scenario.py refuses before SUMO starts, and what its message says.
+BAD_VALUES = [
+    ("evs=-1", "evs=-1"),
+    ("scenario.charging_points=0", "charging_points=0"),
+    ("begin=90000", "begin=90000"),
+    ("scenario.path=/no/such/folder", "/no/such/folder"),
+    ("+perturbations.rain={hours: [0, 30]}", "perturbations.rain.hours=[0, 30]"),
+]
+
+
+@pytest.fixture(scope="module")
+def refused(
+    scenario_dir: Path, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, list[tuple[int, str]]]:
+    """Every case of :data:`BAD_VALUES` run by inspect_scenario.py in one process (:func:`run_refusals`),
+    each into its own run directory."""
+    root = tmp_path_factory.mktemp("refused")
+    cases = [[f"scenario.path={scenario_dir}", override, f"hydra.run.dir={root / f'run{i}'}"]
+             for i, (override, _) in enumerate(BAD_VALUES)]  # fmt: skip
+    return root, run_refusals("inspect_scenario.py", cases, root)
+
+
+@pytest.mark.xdist_group("inspect_refusals")
+@pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
+def test_bad_values_stop_before_sumo(refused, case):
+    root, runs = refused
+    code, log = runs[case]
+    assert code == 2, log[-2000:]
+    assert BAD_VALUES[case][1] in log
+    assert not (root / f"run{case}" / "routes.rou.xml.gz").exists()  # nothing was generated or simulated
+
+
+def test_a_refusal_exits_with_code_2_in_a_process_of_its_own(scenario_dir, tmp_path):
+    """What the batched refusals above stand for: ``python scripts/inspect_scenario.py`` itself, refused,
+    exits with code 2 and the message before anything is generated."""
     out = tmp_path / "run"
-    proc = run_inspect(f"scenario.path={scenario_dir}", override, f"hydra.run.dir={out}")
+    proc = run_inspect(f"scenario.path={scenario_dir}", "evs=-1", f"hydra.run.dir={out}")
     assert proc.returncode == 2
-    assert needle in proc.stdout + proc.stderr
-    assert not (out / "routes.rou.xml.gz").exists()  # nothing was generated or simulated
+    assert "evs=-1" in proc.stdout + proc.stderr
+    assert not (out / "routes.rou.xml.gz").exists()
 
 
 def test_unknown_option_is_rejected_by_name(tmp_path):

@@ -5,13 +5,14 @@ before SUMO starts, and ``none`` leaves every argument as before."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from hydra.errors import ConfigCompositionException
 
 from evcd.env import ChargingNavEnv
 from evcd.experiments.worlds import env_kwargs, fleet_kwargs, split_kwargs
-from tests.conftest import compose_config, run_refused, run_script
+from tests.conftest import compose_config, run_refusals, run_refused, run_script
 
 
 def test_none_is_the_default_and_adds_nothing():
@@ -85,21 +86,45 @@ def test_a_perturbed_run_plays_its_days_outages(script_overrides, tmp_path):
         env.close()
 
 
+#: Perturbation settings (over perturbations=outages) train.py refuses before SUMO starts, and what its
+#: message says.
+BAD_PERTURBATIONS = [
+    ("perturbations.outages.per_day=-1", "perturbations.outages.per_day"),
+    ("perturbations.outages.minutes=[100,10]", "perturbations.outages.minutes=[100, 10]"),
+    ("+perturbations.rain={factor: 0.8}", "perturbations.rain.factor: unknown"),
+    ("+perturbations.rain={speed_factor: 1.5}", "perturbations.rain.speed_factor"),
+    ("+perturbations.incidents={minutes: [0, 30]}", "perturbations.incidents.minutes=[0, 30]"),
+    ("+perturbations.roadworks={lanes_closed: -1}", "perturbations.roadworks.lanes_closed"),
+]
+#: train.py's forecast rule on the oracle (the last case run by ``refused``), and what its message says.
+ORACLE = (["agent=queue_forecast", "env.observe=[forecast]", "env.forecaster=oracle"],
+          "env.forecaster=oracle reads the day's own future")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def refused(
+    script_overrides: list[str], tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, list[tuple[int, str]]]:
+    """Every case of :data:`BAD_PERTURBATIONS`, then :data:`ORACLE`, run by train.py in one process
+    (:func:`run_refusals`), each into its own run directory with its own snapshot cache."""
+    root = tmp_path_factory.mktemp("refused")
+    kept = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
+    args = [["agent=greedy", "perturbations=outages", override] for override, _ in BAD_PERTURBATIONS]
+    cases = [[*kept, *extra, f"env.cache_dir={root / f'cache{i}'}", f"hydra.run.dir={root / f'run{i}'}"]
+             for i, extra in enumerate([*args, ORACLE[0]])]  # fmt: skip
+    return root, run_refusals("train.py", cases, root)
+
+
+@pytest.mark.xdist_group("perturbations_refusals")
 @pytest.mark.parametrize(
-    ("override", "message"),
-    [
-        ("perturbations.outages.per_day=-1", "perturbations.outages.per_day"),
-        ("perturbations.outages.minutes=[100,10]", "perturbations.outages.minutes=[100, 10]"),
-        ("+perturbations.rain={factor: 0.8}", "perturbations.rain.factor: unknown"),
-        ("+perturbations.rain={speed_factor: 1.5}", "perturbations.rain.speed_factor"),
-        ("+perturbations.incidents={minutes: [0, 30]}", "perturbations.incidents.minutes=[0, 30]"),
-        ("+perturbations.roadworks={lanes_closed: -1}", "perturbations.roadworks.lanes_closed"),
-    ],
+    "case", range(len(BAD_PERTURBATIONS)), ids=[override for override, _ in BAD_PERTURBATIONS]
 )
-def test_bad_perturbations_stop_the_run_before_sumo(override, message, script_overrides, tmp_path):
-    log = run_refused("train.py", script_overrides, "agent=greedy", "perturbations=outages", override,
-                      f"hydra.run.dir={tmp_path / 'run'}", cache=tmp_path / "cache")  # fmt: skip
-    assert message in log
+def test_bad_perturbations_stop_the_run_before_sumo(refused, case):
+    root, runs = refused
+    code, log = runs[case]
+    assert code == 2, log[-2000:]
+    assert not (root / f"cache{case}").exists()  # no day was simulated
+    assert BAD_PERTURBATIONS[case][1] in log
 
 
 def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script_overrides, tmp_path):
@@ -136,8 +161,9 @@ def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script
     assert proc.returncode == 2 and "observe" in log, log[-2000:]
 
 
+@pytest.mark.xdist_group("perturbations_refusals")
 def test_the_forecast_rule_runs_on_the_training_days_history_and_the_oracle_is_refused(
-    script_overrides, tmp_path
+    script_overrides, refused, tmp_path
 ):
     """train.py with env.observe=[forecast]: the history forecaster learns from the training days
     (the environments are given them), queue_forecast plays beside queue_aware; the oracle stops the
@@ -150,10 +176,11 @@ def test_the_forecast_rule_runs_on_the_training_days_history_and_the_oracle_is_r
     assert data["agent"] == "queue_forecast" and list(data["baselines"]) == ["queue_aware"]
     cfg = compose_config("train", *script_overrides, "env.observe=[forecast]")
     assert split_kwargs(cfg, "eval", 0)["forecast_days"] == tuple(cfg.days.train)
-    for script, extra, needle in (
-        ("train.py", ["env.forecaster=oracle"], "env.forecaster=oracle reads the day's own future"),
-        ("evaluate.py", [], "forecaster=history needs training days: forecast_days=[...]"),
-    ):
-        log = run_refused(script, script_overrides, "agent=queue_forecast", "env.observe=[forecast]", *extra,
-                          f"hydra.run.dir={tmp_path / script}", cache=tmp_path / "cache")  # fmt: skip
-        assert needle in log, log[-2000:]
+    root, runs = refused  # train.py's oracle: the last case of the batched refusals
+    code, log = runs[len(BAD_PERTURBATIONS)]
+    assert code == 2, log[-2000:]
+    assert not (root / f"cache{len(BAD_PERTURBATIONS)}").exists()  # no day was simulated
+    assert ORACLE[1] in log, log[-2000:]
+    log = run_refused("evaluate.py", script_overrides, "agent=queue_forecast", "env.observe=[forecast]",
+                      f"hydra.run.dir={tmp_path / 'evaluate.py'}", cache=tmp_path / "cache")  # fmt: skip
+    assert "forecaster=history needs training days: forecast_days=[...]" in log, log[-2000:]

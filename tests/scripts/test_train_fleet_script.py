@@ -16,7 +16,7 @@ from evcd.agents import agent_names, make_agent_for_env
 from evcd.env.fleet import FleetEnv
 from evcd.experiments.worlds import fleet_kwargs
 from evcd.utils.checkpoint import load_checkpoint
-from tests.conftest import compose_config, run_script
+from tests.conftest import compose_config, run_refusals, run_script
 
 #: A fleet on the script grid (as the evaluate script's tests): charging EVs departing 06:00-07:00,
 #: one day per use.
@@ -152,30 +152,44 @@ def test_each_seed_plays_its_own_evaluation_days_in_turn(small, tmp_path):
     assert "only 1 of 2" not in proc.stdout + proc.stderr
 
 
+#: Fleet training settings (over :data:`FLEET` and :data:`TINY`) train.py refuses before SUMO starts, and
+#: what its message says.
+BAD_FLEET_TRAINING = [
+    (["experiment=peak", "task=fleet"], "task=fleet with experiment regime 'peak'"),
+    (["task=single"], "regime 'fleet' is the fleet's: it needs task=fleet"),
+    (["agent=hindsight"], "agent 'hindsight' is not an agent of task=fleet"),
+    (["eval.baselines=[dqn]"], "eval.baselines: 'dqn' is not a rule"),
+    (["train.validation.rules=[dueling_ddqn]"], "train.validation.rules: 'dueling_ddqn' is not a rule"),
+    (["fleet.guided_share=0"], "guided_share=0"),
+    (["fleet.guided_share=1.5"], "guided_share=1.5"),
+    (["env.protocol=paper"], "env.protocol=paper is for the single target"),
+    (["train.validation.days=[0]"], "train.validation.days share [0]"),
+    (["agent.checkpoint=somewhere"], "agent.checkpoint is for scripts/evaluate.py"),
+    (["env.departure_window=[3600,3660]"], "nothing to guide"),
+    (
+        ["train.checkpoint_every=2", "train.validation.every=3"],
+        "must be a multiple of train.checkpoint_every",
+    ),
+]
+
+
+@pytest.fixture(scope="module")
+def refused(small: list[str], tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[tuple[int, str]]]:
+    """Every case of :data:`BAD_FLEET_TRAINING` run by train.py in one process (:func:`run_refusals`),
+    each into its own run directory."""
+    root = tmp_path_factory.mktemp("refused")
+    cases = [[*small, *overrides, f"hydra.run.dir={root / f'run{i}'}"]
+             for i, (overrides, _) in enumerate(BAD_FLEET_TRAINING)]  # fmt: skip
+    return root, run_refusals("train.py", cases, root)
+
+
+@pytest.mark.xdist_group("train_fleet_refusals")
 @pytest.mark.parametrize(
-    "overrides,needle",
-    [
-        (["experiment=peak", "task=fleet"], "task=fleet with experiment regime 'peak'"),
-        (["task=single"], "regime 'fleet' is the fleet's: it needs task=fleet"),
-        (["agent=hindsight"], "agent 'hindsight' is not an agent of task=fleet"),
-        (["eval.baselines=[dqn]"], "eval.baselines: 'dqn' is not a rule"),
-        (["train.validation.rules=[dueling_ddqn]"], "train.validation.rules: 'dueling_ddqn' is not a rule"),
-        (["fleet.guided_share=0"], "guided_share=0"),
-        (["fleet.guided_share=1.5"], "guided_share=1.5"),
-        (["env.protocol=paper"], "env.protocol=paper is for the single target"),
-        (["train.validation.days=[0]"], "train.validation.days share [0]"),
-        (["agent.checkpoint=somewhere"], "agent.checkpoint is for scripts/evaluate.py"),
-        (["env.departure_window=[3600,3660]"], "nothing to guide"),
-        (
-            ["train.checkpoint_every=2", "train.validation.every=3"],
-            "must be a multiple of train.checkpoint_every",
-        ),
-    ],
+    "case", range(len(BAD_FLEET_TRAINING)), ids=[" ".join(o) for o, _ in BAD_FLEET_TRAINING]
 )
-def test_bad_fleet_training_settings_stop_before_sumo(small, tmp_path, overrides, needle):
-    run = tmp_path / "run"
-    proc = run_script("train.py", *small, *overrides, f"hydra.run.dir={run}")
-    log = proc.stdout + proc.stderr
-    assert proc.returncode == 2, log[-2000:]
-    assert needle in log
-    assert "simulating a background day" not in log and not any(Path(run).glob("*.csv"))
+def test_bad_fleet_training_settings_stop_before_sumo(refused, case):
+    root, runs = refused
+    code, log = runs[case]
+    assert code == 2, log[-2000:]
+    assert BAD_FLEET_TRAINING[case][1] in log
+    assert "simulating a background day" not in log and not any((root / f"run{case}").glob("*.csv"))

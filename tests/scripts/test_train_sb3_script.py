@@ -15,7 +15,7 @@ from stable_baselines3 import DQN, PPO
 from evcd.env import ChargingNavEnv
 from evcd.env.observation import unit_divisors
 from evcd.experiments.sb3_train import SB3Policy, SB3Settings
-from tests.conftest import compose_config, run_refused, run_script
+from tests.conftest import compose_config, run_refusals, run_script
 
 TINY = ["sb3.envs=4", "eval.episodes=4"]
 
@@ -124,24 +124,41 @@ def test_same_seed_same_result_for_dqn(script_overrides, tmp_path):
     assert DQN.load(runs["a"] / "sb3_model.zip", device="cpu").num_timesteps == 400
 
 
-@pytest.mark.parametrize(
-    ("override", "message"),
-    [
-        ("sb3.algo=a2c", "sb3.algo='a2c': must be one of ppo, dqn"),
-        ("sb3.envs=0", "sb3.envs"),
-        ("sb3.timesteps=-5", "sb3.timesteps"),
-        ("+sb3.params.not_an_argument=1", "not_an_argument"),
-        ("+sb3.params.seed=4", "sb3.params.seed: evcd sets it"),
-        ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is a learner, not a rule; the rules: random"),
-        ("eval.baselines=[foo]", "eval.baselines: 'foo' is not a rule"),
-        ("experiment=fleet", "trains the single target"),
-    ],
-)
-def test_bad_settings_stop_before_sumo(override, message, script_overrides, tmp_path):
-    log = run_refused("train_sb3.py", script_overrides, override, f"hydra.run.dir={tmp_path / 'run'}",
-                      cache=tmp_path / "cache")  # fmt: skip
-    assert message in log
-    assert not (tmp_path / "run" / "results.json").exists()
+#: Settings train_sb3.py refuses before SUMO starts, and what its message says.
+BAD_SETTINGS = [
+    ("sb3.algo=a2c", "sb3.algo='a2c': must be one of ppo, dqn"),
+    ("sb3.envs=0", "sb3.envs"),
+    ("sb3.timesteps=-5", "sb3.timesteps"),
+    ("+sb3.params.not_an_argument=1", "not_an_argument"),
+    ("+sb3.params.seed=4", "sb3.params.seed: evcd sets it"),
+    ("eval.baselines=[dqn]", "eval.baselines: 'dqn' is a learner, not a rule; the rules: random"),
+    ("eval.baselines=[foo]", "eval.baselines: 'foo' is not a rule"),
+    ("experiment=fleet", "trains the single target"),
+]
+
+
+@pytest.fixture(scope="module")
+def refused(
+    script_overrides: list[str], tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, list[tuple[int, str]]]:
+    """Every case of :data:`BAD_SETTINGS` run by train_sb3.py in one process (:func:`run_refusals`), each
+    into its own run directory with its own snapshot cache."""
+    root = tmp_path_factory.mktemp("refused")
+    kept = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
+    cases = [[*kept, f"env.cache_dir={root / f'cache{i}'}", override, f"hydra.run.dir={root / f'run{i}'}"]
+             for i, (override, _) in enumerate(BAD_SETTINGS)]  # fmt: skip
+    return root, run_refusals("train_sb3.py", cases, root)
+
+
+@pytest.mark.xdist_group("train_sb3_refusals")
+@pytest.mark.parametrize("case", range(len(BAD_SETTINGS)), ids=[override for override, _ in BAD_SETTINGS])
+def test_bad_settings_stop_before_sumo(refused, case):
+    root, runs = refused
+    code, log = runs[case]
+    assert code == 2, log[-2000:]
+    assert not (root / f"cache{case}").exists()  # no day was simulated
+    assert BAD_SETTINGS[case][1] in log
+    assert not (root / f"run{case}" / "results.json").exists()
 
 
 def test_a_run_directory_with_results_is_not_overwritten(ppo_run, script_overrides):
