@@ -12,6 +12,7 @@ from evcd.report.compare import Runs
 from tests.conftest import run_script
 
 
+@pytest.mark.slow
 def test_runs_of_a_seed_pair_across_worlds(script_overrides, tmp_path):
     """A calm run and one whose agents see the points in service (all in service on a calm day):
     queue_aware decides the same in both, so its paired difference across the worlds is exactly 0
@@ -38,6 +39,7 @@ def test_runs_of_a_seed_pair_across_worlds(script_overrides, tmp_path):
     assert proc.returncode == 2 and "exists" in proc.stdout + proc.stderr
 
 
+@pytest.mark.slow
 def test_fleet_runs_pair_by_fleet_episode_on_the_guided_evs(script_overrides, tmp_path):
     """The same for fleet runs: rows per world on the guided EVs' mean travel time of each fleet
     episode (the value in the run's fleet_episodes.csv), queue_aware exactly 0 across the worlds."""
@@ -60,6 +62,7 @@ def test_fleet_runs_pair_by_fleet_episode_on_the_guided_evs(script_overrides, tm
         Runs.read([tmp_path], "speed")
 
 
+@pytest.mark.slow
 def test_a_run_read_twice_is_kept_once_and_other_numbers_for_it_are_named(script_overrides, tmp_path, caplog):
     from tests.scripts.test_train_fleet_script import FLEET
 
@@ -90,6 +93,7 @@ def test_a_fleet_row_is_never_paired_with_a_single_targets():
     assert runs.paired(("fleet", "greedy"), ("fleet", "greedy")) is not None
 
 
+@pytest.mark.slow
 def test_against_calm_pairs_each_perturbed_row_with_its_dispatcher_calm(script_overrides, tmp_path):
     """``--against-calm``: a perturbed row minus the same dispatcher in the calm run of its regime and
     observation; the per-seed difference is the two runs' mean travel times apart (no episode

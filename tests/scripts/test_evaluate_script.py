@@ -69,6 +69,7 @@ def test_defaults_of_the_evaluate_config():
     assert asdict(demand_config(cfg)) == lib
 
 
+@pytest.mark.slow
 def test_every_agent_config_builds_its_agent(scenario_dir):
     import numpy as np
 
@@ -99,6 +100,7 @@ def test_unknown_keys_are_rejected_by_hydra(override):
 
 
 # ---------------------------------------------------------------------------------------- the script
+@pytest.mark.slow
 def test_evaluate_end_to_end(small, tmp_path):
     out = tmp_path / "run"
     proc = run_evaluate(*small, "agent=random", "episodes=2", "seed=4", f"hydra.run.dir={out}")
@@ -120,6 +122,7 @@ def test_evaluate_end_to_end(small, tmp_path):
     assert "mean travel time" in log and "95% CI" in log
 
 
+@pytest.mark.slow
 def test_a_sweep_writes_one_run_dir_per_job(small, tmp_path):
     sweep = tmp_path / "sweep"
     proc = run_evaluate("-m", *small, "agent=greedy,queue_aware", "episodes=1", f"hydra.sweep.dir={sweep}")
@@ -174,6 +177,7 @@ def refused(small: list[str], tmp_path_factory: pytest.TempPathFactory) -> dict[
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("evaluate_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
 def test_bad_values_stop_before_sumo(refused, case):
@@ -183,12 +187,14 @@ def test_bad_values_stop_before_sumo(refused, case):
     assert "simulating the day" not in log and not (out / "results.json").exists()
 
 
+@pytest.mark.slow
 def test_unknown_agent_group_lists_the_known_ones(tmp_path):
     proc = run_evaluate("agent=dqnn", f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode != 0
     assert "agent/dqnn" in proc.stderr and "greedy" in proc.stderr and "random" in proc.stderr
 
 
+@pytest.mark.slow
 def test_an_existing_results_file_is_not_overwritten(small, tmp_path):
     out = tmp_path / "run"
     out.mkdir()
@@ -199,6 +205,7 @@ def test_an_existing_results_file_is_not_overwritten(small, tmp_path):
 
 
 # ---------------------------------------------------------------------------------------- task=fleet
+@pytest.mark.slow
 def test_the_fleet_task_composes_its_defaults_and_builds_every_fleet_rule(small):
     import numpy as np
 
@@ -216,6 +223,7 @@ def test_the_fleet_task_composes_its_defaults_and_builds_every_fleet_rule(small)
         assert make_agent_for_env(name, env, np.random.default_rng(0), **params).name == name
 
 
+@pytest.mark.slow
 def test_evaluate_a_fleet_end_to_end(small, tmp_path):
     out = tmp_path / "run"
     proc = run_evaluate(*small, *FLEET, "agent=reservation", "fleet.guided_share=0.5", f"hydra.run.dir={out}")
@@ -232,6 +240,7 @@ def test_evaluate_a_fleet_end_to_end(small, tmp_path):
     assert "guided EVs" in proc.stdout + proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("evaluate_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_FLEET)), ids=[" ".join(o) for o, _ in BAD_FLEET])
 def test_bad_fleet_settings_stop_before_sumo(refused, case):
@@ -241,6 +250,7 @@ def test_bad_fleet_settings_stop_before_sumo(refused, case):
     assert "simulating the day" not in log and not (out / "results.json").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("evaluate_refusals")
 def test_a_fleet_rule_on_the_single_task_is_refused(refused):
     ((_, code, log),) = refused["central"]

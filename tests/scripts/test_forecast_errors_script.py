@@ -11,6 +11,8 @@ import pytest
 
 from tests.conftest import run_refusals, run_script
 
+pytestmark = pytest.mark.slow  # every test here takes seconds
+
 #: Settings forecast_errors.py (comparing the sessions forecaster) refuses, and what its message says.
 BAD_SETTINGS = [
     ("+forecast.settings.sessions.statistic=mode", "statistic='mode': must be one of median, mean"),

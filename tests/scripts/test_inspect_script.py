@@ -34,6 +34,7 @@ def test_yaml_demand_defaults_equal_the_library_defaults():
     assert cfg.evs == 400 and cfg.scenario.charging_points == 2
 
 
+@pytest.mark.slow
 def test_inspect_a_morning_on_a_small_scenario(scenario_dir, tmp_path):
     out = tmp_path / "run"
     proc = run_inspect(
@@ -62,6 +63,7 @@ def test_inspect_a_morning_on_a_small_scenario(scenario_dir, tmp_path):
     assert "per station" in log and "station-to-station road distance" in log
 
 
+@pytest.mark.slow
 def test_inspect_a_perturbed_morning_plays_and_draws_its_events(scenario_dir, tmp_path):
     """perturbations=mixed with every kind in the morning: the report lists the events drawn from the
     day's seed (those an environment of that day plays), the hourly traffic is slower than the calm
@@ -116,6 +118,7 @@ def refused(
     return root, run_refusals("inspect_scenario.py", cases, root)
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("inspect_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
 def test_bad_values_stop_before_sumo(refused, case):
@@ -126,6 +129,7 @@ def test_bad_values_stop_before_sumo(refused, case):
     assert not (root / f"run{case}" / "routes.rou.xml.gz").exists()  # nothing was generated or simulated
 
 
+@pytest.mark.slow
 def test_a_refusal_exits_with_code_2_in_a_process_of_its_own(scenario_dir, tmp_path):
     """What the batched refusals above stand for: ``python scripts/inspect_scenario.py`` itself, refused,
     exits with code 2 and the message before anything is generated."""
@@ -136,6 +140,7 @@ def test_a_refusal_exits_with_code_2_in_a_process_of_its_own(scenario_dir, tmp_p
     assert not (out / "routes.rou.xml.gz").exists()
 
 
+@pytest.mark.slow
 def test_unknown_option_is_rejected_by_name(tmp_path):
     proc = run_inspect("no_such_option=3", f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode != 0

@@ -89,6 +89,7 @@ def test_the_ray_launcher_has_the_fields_of_the_plugins_config():
 
 
 # ---------------------------------------------------------------------------------------- sweeps
+@pytest.mark.slow
 def test_a_joblib_sweep_runs_every_job(small, tmp_path):
     out = tmp_path / "sweep"
     proc = sweep(*small, "agent=greedy,random", f"hydra.sweep.dir={out}")
@@ -113,6 +114,7 @@ def test_a_joblib_sweep_runs_every_job(small, tmp_path):
     assert "## Regime `peak`" in md and "Jobs: 2 (2 agents, EV counts 30, 1 seeds: 0)" in md
 
 
+@pytest.mark.slow
 def test_a_failing_job_fails_alone_and_the_sweep_reports_it(small, tmp_path):
     out = tmp_path / "sweep"
     # job 0 has a bad value, job 1 is fine: job 0 must not take job 1 down with it
@@ -129,6 +131,7 @@ def test_a_failing_job_fails_alone_and_the_sweep_reports_it(small, tmp_path):
         make_table([out], tmp_path / "table", resamples=200)
 
 
+@pytest.mark.slow
 def test_a_failing_evaluation_job_fails_alone_too(small, tmp_path):
     out = tmp_path / "sweep"
     evaluate = [o.replace("eval.", "") for o in small]  # scripts/evaluate.py: episodes=, bootstrap_resamples=

@@ -101,6 +101,7 @@ def weights(run_dir: Path) -> tuple[list[float], list[float]]:
     return list(np.asarray(agent["w"])), list(np.asarray(agent["b"]))
 
 
+@pytest.mark.slow
 def test_an_outside_learner_trains_resumes_and_is_evaluated_on_the_single_target(
     installed, script_overrides, tmp_path
 ):
@@ -133,6 +134,7 @@ def test_an_outside_learner_trains_resumes_and_is_evaluated_on_the_single_target
     assert read_csv(ev / "episodes.csv") == read_csv(reference / "episodes.csv")
 
 
+@pytest.mark.slow
 def test_an_outside_learner_trains_on_the_fleet_and_is_evaluated(installed, script_overrides, tmp_path):
     run_dir = tmp_path / "run"
     proc = run("train.py", *script_overrides, *FLEET, "agent=tiny", "train.episodes=2",

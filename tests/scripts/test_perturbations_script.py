@@ -56,6 +56,7 @@ def test_an_unknown_option_is_refused_by_hydra():
         compose_config("train", "perturbations=hail")
 
 
+@pytest.mark.slow
 def test_a_perturbed_run_plays_its_days_outages(script_overrides, tmp_path):
     run = tmp_path / "run"
     proc = run_script(
@@ -115,6 +116,7 @@ def refused(
     return root, run_refusals("train.py", cases, root)
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("perturbations_refusals")
 @pytest.mark.parametrize(
     "case", range(len(BAD_PERTURBATIONS)), ids=[override for override, _ in BAD_PERTURBATIONS]
@@ -127,6 +129,7 @@ def test_bad_perturbations_stop_the_run_before_sumo(refused, case):
     assert BAD_PERTURBATIONS[case][1] in log
 
 
+@pytest.mark.slow
 def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script_overrides, tmp_path):
     """A DQN with ``env.observe=[points_in_service,route_time]`` in a mixed world: it trains and is
     evaluated beside queue_aware reading the same blocks; its saved policy evaluates in the same
@@ -161,6 +164,7 @@ def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script
     assert proc.returncode == 2 and "observe" in log, log[-2000:]
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("perturbations_refusals")
 def test_the_forecast_rule_runs_on_the_training_days_history_and_the_oracle_is_refused(
     script_overrides, refused, tmp_path

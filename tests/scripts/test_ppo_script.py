@@ -16,6 +16,8 @@ from tests.conftest import run_script
 from tests.scripts.test_train_fleet_script import FLEET
 from tests.scripts.test_train_script import KILL_MID_BATCH, read_csv, run_train
 
+pytestmark = pytest.mark.slow  # every test here takes seconds
+
 #: A tiny PPO run on the grid: an update every 8 transitions.
 PPO = ["agent=ppo", "agent.hidden=[16,16]", "agent.rollout_steps=8", "agent.minibatch_size=4",
        "agent.epochs=2", "train.episodes=6", "train.checkpoint_every=2", "batch_episodes=2",

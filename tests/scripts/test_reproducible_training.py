@@ -25,6 +25,8 @@ from evcd.bench.determinism import ALLOCATE_FIRST
 from tests.conftest import ROOT, SCRIPTS
 from tests.scripts.test_train_script import final_weights, read_csv
 
+pytestmark = pytest.mark.slow  # every test here takes seconds
+
 #: A congested grid day: ~70 charging EVs in two hours for 3 stations of 2 points.
 BUSY = [
     "evs=120", "scenario.demand.cars_per_day=800", "scenario.demand.min_trip_m=500",

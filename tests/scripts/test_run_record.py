@@ -35,6 +35,8 @@ def job_dirs(sweep: Path) -> list[Path]:
     return sorted(d for d in sweep.iterdir() if d.is_dir())
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("run_record_sweep")
 def test_a_refused_run_leaves_the_record_of_the_run_it_refused(sweep, script_overrides, tmp_path):
     job = job_dirs(sweep)[0]
     before = record(job)
@@ -50,6 +52,7 @@ def test_a_refused_run_leaves_the_record_of_the_run_it_refused(sweep, script_ove
     assert "2 of 2 expected jobs finished" in table.stdout + table.stderr
 
 
+@pytest.mark.slow
 def test_a_refused_resume_with_changed_settings_leaves_the_record(script_overrides, tmp_path):
     out = tmp_path / "run"
     args = [*script_overrides, "agent=dqn", "learner.hidden=[16,16]", "learner.learning_starts=4",
@@ -64,6 +67,7 @@ def test_a_refused_resume_with_changed_settings_leaves_the_record(script_overrid
     assert record(out) == before
 
 
+@pytest.mark.slow
 def test_a_run_refused_before_its_start_leaves_no_directory(script_overrides, tmp_path):
     out = tmp_path / "new-run"
     proc = run_script("train.py", *script_overrides, "agent=dqn", "learner.lr=-0.1", f"hydra.run.dir={out}")
@@ -76,6 +80,8 @@ def test_a_run_refused_before_its_start_leaves_no_directory(script_overrides, tm
     assert not list((tmp_path / "outputs" / "train").glob("*"))
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("run_record_sweep")
 def test_an_accepted_run_writes_its_record(sweep):
     for job, seed in zip(job_dirs(sweep), (0, 1), strict=True):
         rec = record(job)

@@ -18,6 +18,8 @@ from evcd.experiments.worlds import fleet_kwargs
 from evcd.utils.checkpoint import load_checkpoint
 from tests.conftest import compose_config, run_refusals, run_script
 
+pytestmark = pytest.mark.slow  # every test here takes seconds
+
 #: A fleet on the script grid (as the evaluate script's tests): charging EVs departing 06:00-07:00,
 #: one day per use.
 FLEET = [

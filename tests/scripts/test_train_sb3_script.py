@@ -42,6 +42,8 @@ def ppo_run(script_overrides, tmp_path_factory) -> Path:
     return run
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_ppo_run_writes_evcd_results_with_sb3_training(ppo_run):
     data = json.loads((ppo_run / "results.json").read_text())
     assert data["agent"] == "sb3_ppo" and data["seed"] == 3 and data["task"] == "single"
@@ -63,6 +65,8 @@ def test_ppo_run_writes_evcd_results_with_sb3_training(ppo_run):
     assert (ppo_run / "sb3_model.zip").is_file() and (ppo_run / ".hydra" / "config.yaml").is_file()
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_the_saved_model_is_the_policy_evaluated(ppo_run, script_overrides):
     """``PPO.load`` of the run's zip, as an evcd dispatcher, decides the evaluation's stations again."""
     from evcd.experiments.worlds import split_kwargs
@@ -79,6 +83,8 @@ def test_the_saved_model_is_the_policy_evaluated(ppo_run, script_overrides):
     assert stations == [s for _, _, s in _travel(ppo_run)]
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_the_baselines_play_train_py_episodes(ppo_run, script_overrides, tmp_path):
     """The rules of an SB3 run play the very episodes ``train.py`` evaluates its agents on (same seed):
     queue_aware's travel times equal episode by episode, so the SB3 rows pair with evcd's."""
@@ -96,6 +102,7 @@ def test_the_baselines_play_train_py_episodes(ppo_run, script_overrides, tmp_pat
     assert _travel(run) == _travel(ppo_run, "baseline_queue_aware_episodes.csv")
 
 
+@pytest.mark.slow
 def test_same_seed_same_result_for_dqn(script_overrides, tmp_path):
     """Two DQN runs of one seed: the same policy (SHA-256 of its tensors) and the same evaluation; a
     different seed trains another policy."""
@@ -150,6 +157,7 @@ def refused(
     return root, run_refusals("train_sb3.py", cases, root)
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("train_sb3_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_SETTINGS)), ids=[override for override, _ in BAD_SETTINGS])
 def test_bad_settings_stop_before_sumo(refused, case):
@@ -161,6 +169,8 @@ def test_bad_settings_stop_before_sumo(refused, case):
     assert not (root / f"run{case}" / "results.json").exists()
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_a_run_directory_with_results_is_not_overwritten(ppo_run, script_overrides):
     before = (ppo_run / "results.json").read_bytes()
     proc = run_script(

@@ -116,6 +116,7 @@ def final_weights(run_dir: Path) -> dict[str, torch.Tensor]:
 
 
 # ---------------------------------------------------------------------------------------- configs
+@pytest.mark.slow
 @pytest.mark.parametrize("experiment", [e for e in EXPERIMENTS if e != "fleet"])  # the fleet's: its own file
 @pytest.mark.parametrize("evs", [200, 300, 400])
 def test_every_agent_and_experiment_composes_and_builds(experiment, evs, scenario_dir):
@@ -146,6 +147,7 @@ def test_the_days_of_every_shipped_experiment_are_disjoint(experiment):
     assert set(cfg.train.validation.days) <= days["tuning"]
 
 
+@pytest.mark.slow
 def test_training_departures_follow_train_departure_window(small, tmp_path):
     """train.departure_window narrows the training departures only: the evaluation keeps
     env.departure_window (06:00-06:30 on the grid)."""
@@ -162,6 +164,7 @@ def test_training_departures_follow_train_departure_window(small, tmp_path):
     assert proc.returncode == 2 and "departure_window" in out_text and "23400" in out_text, out_text[-2000:]
 
 
+@pytest.mark.slow
 def test_each_seed_can_run_on_its_own_evaluation_day(small, tmp_path):
     out = tmp_path / "run"
     proc = run_train(*small, "agent=greedy", "eval.day_per_seed=true", "days.evaluation=[5,6,7]", "seed=4",
@@ -197,6 +200,7 @@ def test_dqn_and_dueling_ddqn_configs_differ_only_in_the_switches():
     assert agent_class("dqn") is agent_class("dueling_ddqn") is DQNAgent
 
 
+@pytest.mark.slow
 def test_the_learner_block_is_the_dqn_config():
     """The learner block is DQNConfig itself (a structured config): its fields and defaults, a
     preset changing some, an override reaching the agent; an unknown key or a mistyped value is
@@ -227,6 +231,7 @@ def learner_of(cfg) -> DQNConfig:
 
 
 # ---------------------------------------------------------------------------------------- runs
+@pytest.mark.slow
 def test_a_tiny_training_run_end_to_end(small, tmp_path):
     out = tmp_path / "run"
     proc = run_train(
@@ -298,6 +303,7 @@ def test_a_tiny_training_run_end_to_end(small, tmp_path):
         assert proc.returncode == 2 and needle in log, log[-2000:]
 
 
+@pytest.mark.slow
 def test_a_rule_agent_goes_through_the_same_script(small, tmp_path):
     out = tmp_path / "run"
     proc = run_train(*small, "agent=queue_aware", f"hydra.run.dir={out}")
@@ -319,6 +325,8 @@ def uninterrupted(small, tmp_path_factory) -> Path:
     return reference_run(small, tmp_path_factory.mktemp("reference") / "run", "batched")
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("train_reference")  # one worker makes the uninterrupted run
 @pytest.mark.parametrize(
     "patch,checkpoint,engine",
     [(KILL_MID_BATCH.format(when=3), 2, "batched"),  # killed in the 4th training episode: resumes after 2
@@ -359,6 +367,7 @@ def test_a_killed_run_resumes_to_the_same_result(small, uninterrupted, tmp_path,
     assert not list((out / "checkpoints").glob(".*.tmp"))  # the half-written file was cleaned up
 
 
+@pytest.mark.slow
 def test_a_sweep_writes_one_run_directory_per_job(small, tmp_path):
     sweep = tmp_path / "sweep"
     proc = run_train("-m", *small, "agent=greedy,dqn", "train.episodes=2", f"hydra.sweep.dir={sweep}")
@@ -414,6 +423,8 @@ def refused(small, tmp_path_factory) -> tuple[Path, list[tuple[int, str]]]:
     return root, run_refusals("train.py", cases, root)
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("train_refusals")  # one worker runs the cases (the module fixture)
 @pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
 def test_bad_values_stop_before_sumo(refused, case):
     root, runs = refused
@@ -424,6 +435,7 @@ def test_bad_values_stop_before_sumo(refused, case):
     assert not (root / f"run{case}" / "results.json").exists()
 
 
+@pytest.mark.slow
 def test_a_refusal_exits_with_code_2_in_a_process_of_its_own(small, tmp_path):
     """What the batched refusals above stand for: ``python scripts/train.py`` itself, refused, exits
     with code 2 and the message, before any day is simulated, leaving no run directory behind."""
@@ -433,6 +445,7 @@ def test_a_refusal_exits_with_code_2_in_a_process_of_its_own(small, tmp_path):
     assert "lr=-0.1" in log and not (tmp_path / "run").exists()
 
 
+@pytest.mark.slow
 def test_a_learner_that_took_no_gradient_step_is_not_reported(small, tmp_path):
     out = tmp_path / "run"
     proc = run_train(*small, "agent=dqn", "train.episodes=2", "train.checkpoint_every=2",
@@ -443,6 +456,7 @@ def test_a_learner_that_took_no_gradient_step_is_not_reported(small, tmp_path):
     assert load_checkpoint(out / "checkpoints")["trainer"]["episodes_done"] == 2  # kept
 
 
+@pytest.mark.slow
 def test_single_and_batched_engines_play_the_same_episodes(small, tmp_path):
     rows = {}
     for engine in ("single", "batched"):
@@ -458,12 +472,15 @@ def test_single_and_batched_engines_play_the_same_episodes(small, tmp_path):
     assert sum(abs(a - b) for a, b in zip(t["single"], t["batched"], strict=True)) <= 0.05 * sum(t["single"])
 
 
+@pytest.mark.slow
 def test_unknown_experiment_lists_the_known_ones(tmp_path):
     proc = run_train("experiment=nope", f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode != 0
     assert "experiment/nope" in proc.stderr and "peak" in proc.stderr and "paper" in proc.stderr
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("train_reference")
 def test_a_corrupted_checkpoint_is_reported_on_resume(small, uninterrupted, tmp_path):
     import shutil
 
@@ -477,6 +494,7 @@ def test_a_corrupted_checkpoint_is_reported_on_resume(small, uninterrupted, tmp_
     assert proc.returncode == 2 and "truncated" in proc.stdout + proc.stderr
 
 
+@pytest.mark.slow
 def test_the_table_experiment_runs_without_a_baseline_in_the_calibrated_world(small, tmp_path):
     cfg = compose_train("experiment=table")
     assert cfg.regime == "table" and list(cfg.eval.baselines) == []
