@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import fcntl
 import os
-import shutil
 import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
@@ -52,19 +51,24 @@ def shared_folder(
 ) -> Path:
     """The folder ``name`` that every pytest-xdist worker of this test run shares (under the run's
     temporary root; without xdist, under the session's own), made once: the first worker to ask runs
-    ``build(folder)`` under a lock, the others wait and reuse it. A build that failed is redone."""
+    ``build(folder)`` (:func:`build_once`), the others wait and reuse it. For whatever a test module
+    makes once and several tests read (a scenario, a training run, a batch of refused runs): a
+    module-scoped fixture alone is made again on every worker its tests land on."""
     base = tmp_path_factory.getbasetemp()
-    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    folder = root / name
-    with open(root / f".{name}.lock", "a+") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (root / f".{name}.built").exists():
-            shutil.rmtree(folder, ignore_errors=True)
-            folder.mkdir()
-            if build is not None:
-                build(folder)
-            (root / f".{name}.built").touch()
+    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / name
+    folder.mkdir(exist_ok=True)
+    build_once(folder, "folder", (lambda: build(folder)) if build is not None else (lambda: None))
     return folder
+
+
+def build_once(folder: Path, name: str, build: Callable[[], Any]) -> None:
+    """Run ``build()`` once per ``name`` in ``folder`` across the processes of this test run: under a
+    lock in the folder, unless a marker says an earlier call finished (a build that failed is redone)."""
+    with open(folder / f".{name}.lock", "a+") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (folder / f".{name}.done").exists():
+            build()
+            (folder / f".{name}.done").touch()
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -361,14 +365,19 @@ def run_refusals(script: str, cases: Sequence[Sequence[str]], folder: Path) -> l
     """Run ``scripts/<script>`` once per argument list of ``cases``, as ``python scripts/<script> args``
     runs it (its ``__main__``: Hydra composes, the script checks, a refusal exits with code 2), all in
     ONE fresh Python process: the many bad-setting cases of a script pay its start once. Returns each
-    run's exit code and output. ``folder`` holds the case files."""
+    run's exit code and output. ``folder`` holds the case and result files; in a folder of
+    :func:`shared_folder` the cases run once for the whole test run (:func:`build_once`)."""
     import json
 
     folder.mkdir(parents=True, exist_ok=True)
     cases_file, results_file = folder / "cases.json", folder / "results.json"
-    cases_file.write_text(json.dumps([[str(a) for a in case] for case in cases]))
-    proc = run_script(script, str(SCRIPTS / script), cases_file, results_file, code=_REFUSALS_DRIVER)
-    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+
+    def run() -> None:
+        cases_file.write_text(json.dumps([[str(a) for a in case] for case in cases]))
+        proc = run_script(script, str(SCRIPTS / script), cases_file, results_file, code=_REFUSALS_DRIVER)
+        assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+
+    build_once(folder, f"refusals_{script}", run)
     return [(r["code"], r["log"]) for r in json.loads(results_file.read_text())]
 
 

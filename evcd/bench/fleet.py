@@ -6,7 +6,8 @@ observing and deciding at every tick, greedy) / wall time of the same span of th
 from the same snapshot and simulated with its charging points but nobody guided. Both are measured in
 the same process, alternating, on the same episodes; the ratio of the sums is reported.
 ``fleet_transitions_per_second``: agent steps per second of wall time while a shared-parameter DQN
-explores and learns on fleet episodes (training stream; reset and SUMO included).
+explores and learns on fleet episodes (training stream; reset and SUMO included); each row says the
+span both runs simulated, and the learner's gradient steps say it learned while it was timed.
 """
 
 from __future__ import annotations
@@ -55,9 +56,10 @@ def fleet_overhead(env_kwargs: Mapping[str, Any], episodes: int = 3, seed: int =
             alone = wallclock.perf_counter() - t0
             fleet_s += fleet
             alone_s += alone
+            start = env.config.departure_window[0]
             rows.append({"episode": i, "fleet_s": round(fleet, 3), "alone_s": round(alone, 3),
-                         "sim_span_s": end - env.config.departure_window[0], "decisions": ep.transitions,
-                         "guided": ep.measures.guided})  # fmt: skip
+                         "sim_span_s": end - start, "alone_span_s": sim.driver.time - start,
+                         "decisions": ep.transitions, "guided": ep.measures.guided})  # fmt: skip
             log.info("fleet episode %d: %.1f s, the day alone %.1f s (%d guided EVs, %d decisions)",
                      i, fleet, alone, ep.measures.guided, ep.transitions)  # fmt: skip
     finally:
@@ -86,4 +88,4 @@ def fleet_learning_rate(
     steps = sum(ep.transitions for ep in played)
     log.info("fleet learning: %d agent steps in %.1f s (%d episodes)", steps, wall, episodes)
     return {"fleet_transitions_per_second": steps / wall, "transitions": steps, "wall_s": wall,
-            "episodes": episodes}  # fmt: skip
+            "episodes": episodes, "gradient_steps": agent.stats()["gradient_steps"]}  # fmt: skip

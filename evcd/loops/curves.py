@@ -8,8 +8,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib import colormaps
-from matplotlib.figure import Figure
 
 from evcd.loops.validation import ValidationRecord
 from evcd.utils.atomic import atomic_write_png
@@ -53,6 +51,9 @@ def plot_learning_curve(
             rows hold its guided EVs' means).
     """
     validated = validation is not None and bool(validation.points)
+    from matplotlib import colormaps  # matplotlib where a figure is drawn: not in every script's start
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(11, 9.5 if validated else 7))
     if validated:
         ax_t, ax_v, ax_s = fig.subplots(3, 1, sharex=True, height_ratios=[3, 2, 1.2])

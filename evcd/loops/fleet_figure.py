@@ -8,9 +8,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from matplotlib import colormaps
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
 
 from evcd.utils.atomic import atomic_write_png
 
@@ -32,6 +29,10 @@ def plot_fleet_traces(
     if not traces:
         raise ValueError("plot_fleet_traces needs at least one trace")
     n = len(traces)
+    from matplotlib import colormaps  # matplotlib where a figure is drawn: not in every script's start
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
     fig = Figure(figsize=(11, 2.3 * n + 0.8), layout="constrained")
     axes = fig.subplots(n, 1, sharex=True, sharey=True, squeeze=False)[:, 0]
     colors = colormaps["tab10"](np.arange(len(stations)) % 10)

@@ -20,7 +20,7 @@ from evcd.experiments.worlds import demand_config, env_kwargs, fleet_kwargs
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.loops.run_files import CSV_FIELDS
 from evcd.scenario.demand import DemandConfig
-from tests.conftest import CONF, compose_config, run_refusals, run_script
+from tests.conftest import CONF, compose_config, run_refusals, run_script, shared_folder
 
 #: A fleet on the script grid: enough charging EVs departing 06:00-07:00 to guide.
 FLEET = ["task=fleet", "evs=300", "scenario.demand.charging_share=0.6", "env.departure_window=[21600,25200]",
@@ -162,7 +162,7 @@ Refusal = tuple[Path, int, str]
 def refused(small: list[str], tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Refusal]]:
     """Every case of :data:`BAD_VALUES` and :data:`BAD_FLEET`, and agent=central on the single task, run
     by evaluate.py in one process (:func:`run_refusals`), each into its own run directory."""
-    root = tmp_path_factory.mktemp("refused")
+    root = shared_folder(tmp_path_factory, "evaluate_script_refused")
     groups = {
         "single": [[*small, override] for override, _ in BAD_VALUES],
         "fleet": [[*small, *FLEET, *overrides] for overrides, _ in BAD_FLEET],
@@ -178,7 +178,6 @@ def refused(small: list[str], tmp_path_factory: pytest.TempPathFactory) -> dict[
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("evaluate_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
 def test_bad_values_stop_before_sumo(refused, case):
     out, code, log = refused["single"][case]
@@ -241,7 +240,6 @@ def test_evaluate_a_fleet_end_to_end(small, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("evaluate_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_FLEET)), ids=[" ".join(o) for o, _ in BAD_FLEET])
 def test_bad_fleet_settings_stop_before_sumo(refused, case):
     out, code, log = refused["fleet"][case]
@@ -251,7 +249,6 @@ def test_bad_fleet_settings_stop_before_sumo(refused, case):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("evaluate_refusals")
 def test_a_fleet_rule_on_the_single_task_is_refused(refused):
     ((_, code, log),) = refused["central"]
     assert code == 2

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import run_refusals, run_script
+from tests.conftest import run_refusals, run_script, shared_folder
 
 pytestmark = pytest.mark.slow  # every test here takes seconds
 
@@ -27,7 +27,7 @@ def refused(
 ) -> tuple[Path, list[tuple[int, str]]]:
     """Every case of :data:`BAD_SETTINGS` run by forecast_errors.py in one process (:func:`run_refusals`),
     each into its own run directory."""
-    root = tmp_path_factory.mktemp("refused")
+    root = shared_folder(tmp_path_factory, "forecast_errors_script_refused")
     sessions = [*script_overrides, "forecast.forecasters=[sessions]"]
     cases = [[*sessions, override, f"hydra.run.dir={root / f'bad{i}'}"]
              for i, (override, _) in enumerate(BAD_SETTINGS)]  # fmt: skip
@@ -55,7 +55,6 @@ def test_the_forecasters_errors_on_the_held_out_days(script_overrides, tmp_path)
     assert "choose among history, trend, anomaly, sessions, oracle" in proc.stdout + proc.stderr
 
 
-@pytest.mark.xdist_group("forecast_errors_refusals")
 def test_the_tuning_days_with_a_forecasters_settings_and_bad_settings_refused(
     script_overrides, refused, tmp_path
 ):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from evcd.scenario.demand import DemandConfig
-from tests.conftest import ROOT, compose_config, run_refusals, run_script
+from tests.conftest import ROOT, compose_config, run_refusals, run_script, shared_folder
 
 
 def run_inspect(*overrides: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
@@ -112,14 +112,13 @@ def refused(
 ) -> tuple[Path, list[tuple[int, str]]]:
     """Every case of :data:`BAD_VALUES` run by inspect_scenario.py in one process (:func:`run_refusals`),
     each into its own run directory."""
-    root = tmp_path_factory.mktemp("refused")
+    root = shared_folder(tmp_path_factory, "inspect_script_refused")
     cases = [[f"scenario.path={scenario_dir}", override, f"hydra.run.dir={root / f'run{i}'}"]
              for i, (override, _) in enumerate(BAD_VALUES)]  # fmt: skip
     return root, run_refusals("inspect_scenario.py", cases, root)
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("inspect_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
 def test_bad_values_stop_before_sumo(refused, case):
     root, runs = refused

@@ -12,7 +12,7 @@ from hydra.errors import ConfigCompositionException
 
 from evcd.env import ChargingNavEnv
 from evcd.experiments.worlds import env_kwargs, fleet_kwargs, split_kwargs
-from tests.conftest import compose_config, run_refusals, run_refused, run_script
+from tests.conftest import compose_config, run_refusals, run_refused, run_script, shared_folder
 
 
 def test_none_is_the_default_and_adds_nothing():
@@ -108,7 +108,7 @@ def refused(
 ) -> tuple[Path, list[tuple[int, str]]]:
     """Every case of :data:`BAD_PERTURBATIONS`, then :data:`ORACLE`, run by train.py in one process
     (:func:`run_refusals`), each into its own run directory with its own snapshot cache."""
-    root = tmp_path_factory.mktemp("refused")
+    root = shared_folder(tmp_path_factory, "perturbations_script_refused")
     kept = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
     args = [["agent=greedy", "perturbations=outages", override] for override, _ in BAD_PERTURBATIONS]
     cases = [[*kept, *extra, f"env.cache_dir={root / f'cache{i}'}", f"hydra.run.dir={root / f'run{i}'}"]
@@ -117,7 +117,6 @@ def refused(
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("perturbations_refusals")
 @pytest.mark.parametrize(
     "case", range(len(BAD_PERTURBATIONS)), ids=[override for override, _ in BAD_PERTURBATIONS]
 )
@@ -165,7 +164,6 @@ def test_a_learner_trains_on_the_observation_options_in_a_perturbed_world(script
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("perturbations_refusals")
 def test_the_forecast_rule_runs_on_the_training_days_history_and_the_oracle_is_refused(
     script_overrides, refused, tmp_path
 ):

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from evcd.cli.run_record import discard_refused_run_dir
-from tests.conftest import SCRIPTS, run_script
+from tests.conftest import SCRIPTS, run_script, shared_folder
 from tests.scripts.test_train_script import KILL_MID_BATCH, KILLER
 
 RECORD = ("config.yaml", "overrides.yaml", "hydra.yaml")
@@ -23,12 +23,14 @@ def record(run: Path) -> dict[str, bytes]:
 
 @pytest.fixture(scope="module")
 def sweep(script_overrides, tmp_path_factory) -> Path:
-    """A finished 2-job multirun of greedy (seeds 0 and 1)."""
-    out = tmp_path_factory.mktemp("record") / "sweep"
-    proc = run_script("train.py", "-m", *script_overrides, "agent=greedy", "seed=0,1", "eval.episodes=2",
-                      "eval.bootstrap_resamples=200", f"hydra.sweep.dir={out}")  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return out
+    """A finished 2-job multirun of greedy (seeds 0 and 1), made once per test run (:func:`shared_folder`)."""
+
+    def run(root: Path) -> None:
+        proc = run_script("train.py", "-m", *script_overrides, "agent=greedy", "seed=0,1", "eval.episodes=2",
+                          "eval.bootstrap_resamples=200", f"hydra.sweep.dir={root / 'sweep'}")  # fmt: skip
+        assert proc.returncode == 0, proc.stderr[-3000:]
+
+    return shared_folder(tmp_path_factory, "run_record_sweep", run) / "sweep"
 
 
 def job_dirs(sweep: Path) -> list[Path]:
@@ -36,7 +38,6 @@ def job_dirs(sweep: Path) -> list[Path]:
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("run_record_sweep")
 def test_a_refused_run_leaves_the_record_of_the_run_it_refused(sweep, script_overrides, tmp_path):
     job = job_dirs(sweep)[0]
     before = record(job)
@@ -81,7 +82,6 @@ def test_a_run_refused_before_its_start_leaves_no_directory(script_overrides, tm
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("run_record_sweep")
 def test_an_accepted_run_writes_its_record(sweep):
     for job, seed in zip(job_dirs(sweep), (0, 1), strict=True):
         rec = record(job)

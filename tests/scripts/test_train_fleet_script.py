@@ -16,7 +16,7 @@ from evcd.agents import agent_names, make_agent_for_env
 from evcd.env.fleet import FleetEnv
 from evcd.experiments.worlds import fleet_kwargs
 from evcd.utils.checkpoint import load_checkpoint
-from tests.conftest import compose_config, run_refusals, run_script
+from tests.conftest import compose_config, run_refusals, run_script, shared_folder
 
 pytestmark = pytest.mark.slow  # every test here takes seconds
 
@@ -179,13 +179,12 @@ BAD_FLEET_TRAINING = [
 def refused(small: list[str], tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[tuple[int, str]]]:
     """Every case of :data:`BAD_FLEET_TRAINING` run by train.py in one process (:func:`run_refusals`),
     each into its own run directory."""
-    root = tmp_path_factory.mktemp("refused")
+    root = shared_folder(tmp_path_factory, "train_fleet_script_refused")
     cases = [[*small, *overrides, f"hydra.run.dir={root / f'run{i}'}"]
              for i, (overrides, _) in enumerate(BAD_FLEET_TRAINING)]  # fmt: skip
     return root, run_refusals("train.py", cases, root)
 
 
-@pytest.mark.xdist_group("train_fleet_refusals")
 @pytest.mark.parametrize(
     "case", range(len(BAD_FLEET_TRAINING)), ids=[" ".join(o) for o, _ in BAD_FLEET_TRAINING]
 )

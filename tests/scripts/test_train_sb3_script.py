@@ -15,7 +15,7 @@ from stable_baselines3 import DQN, PPO
 from evcd.env import ChargingNavEnv
 from evcd.env.observation import unit_divisors
 from evcd.experiments.sb3_train import SB3Policy, SB3Settings
-from tests.conftest import compose_config, run_refusals, run_script
+from tests.conftest import compose_config, run_refusals, run_script, shared_folder
 
 TINY = ["sb3.envs=4", "eval.episodes=4"]
 
@@ -27,23 +27,18 @@ def _travel(run: Path, name: str = "episodes.csv") -> list[tuple[str, str, str]]
 
 @pytest.fixture(scope="module")
 def ppo_run(script_overrides, tmp_path_factory) -> Path:
-    run = tmp_path_factory.mktemp("sb3") / "ppo"
-    proc = run_script(
-        "train_sb3.py",
-        *script_overrides,
-        *TINY,
-        "sb3=ppo",
-        "sb3.timesteps=256",
-        "seed=3",
-        "eval.baselines=[greedy,queue_aware,hindsight]",
-        f"hydra.run.dir={run}",
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return run
+    """A finished SB3 PPO run (made once per test run: :func:`shared_folder`)."""
+
+    def train(root: Path) -> None:
+        proc = run_script("train_sb3.py", *script_overrides, *TINY, "sb3=ppo", "sb3.timesteps=256", "seed=3",
+                          "eval.baselines=[greedy,queue_aware,hindsight]",
+                          f"hydra.run.dir={root / 'ppo'}")  # fmt: skip
+        assert proc.returncode == 0, proc.stderr[-3000:]
+
+    return shared_folder(tmp_path_factory, "train_sb3_script_ppo", train) / "ppo"
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_ppo_run_writes_evcd_results_with_sb3_training(ppo_run):
     data = json.loads((ppo_run / "results.json").read_text())
     assert data["agent"] == "sb3_ppo" and data["seed"] == 3 and data["task"] == "single"
@@ -66,7 +61,6 @@ def test_ppo_run_writes_evcd_results_with_sb3_training(ppo_run):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_the_saved_model_is_the_policy_evaluated(ppo_run, script_overrides):
     """``PPO.load`` of the run's zip, as an evcd dispatcher, decides the evaluation's stations again."""
     from evcd.experiments.worlds import split_kwargs
@@ -84,7 +78,6 @@ def test_the_saved_model_is_the_policy_evaluated(ppo_run, script_overrides):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_the_baselines_play_train_py_episodes(ppo_run, script_overrides, tmp_path):
     """The rules of an SB3 run play the very episodes ``train.py`` evaluates its agents on (same seed):
     queue_aware's travel times equal episode by episode, so the SB3 rows pair with evcd's."""
@@ -150,7 +143,7 @@ def refused(
 ) -> tuple[Path, list[tuple[int, str]]]:
     """Every case of :data:`BAD_SETTINGS` run by train_sb3.py in one process (:func:`run_refusals`), each
     into its own run directory with its own snapshot cache."""
-    root = tmp_path_factory.mktemp("refused")
+    root = shared_folder(tmp_path_factory, "train_sb3_script_refused")
     kept = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
     cases = [[*kept, f"env.cache_dir={root / f'cache{i}'}", override, f"hydra.run.dir={root / f'run{i}'}"]
              for i, (override, _) in enumerate(BAD_SETTINGS)]  # fmt: skip
@@ -158,7 +151,6 @@ def refused(
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_sb3_refusals")
 @pytest.mark.parametrize("case", range(len(BAD_SETTINGS)), ids=[override for override, _ in BAD_SETTINGS])
 def test_bad_settings_stop_before_sumo(refused, case):
     root, runs = refused
@@ -170,7 +162,6 @@ def test_bad_settings_stop_before_sumo(refused, case):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_sb3_ppo_run")
 def test_a_run_directory_with_results_is_not_overwritten(ppo_run, script_overrides):
     before = (ppo_run / "results.json").read_bytes()
     proc = run_script(

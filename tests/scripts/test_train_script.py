@@ -29,7 +29,7 @@ from evcd.env import ChargingNavEnv
 from evcd.experiments.worlds import env_kwargs
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.utils.checkpoint import load_checkpoint
-from tests.conftest import CONF, SCRIPTS, compose_config, run_refusals, run_refused, run_script
+from tests.conftest import CONF, SCRIPTS, compose_config, run_refusals, run_refused, run_script, shared_folder
 
 SCRIPT = SCRIPTS / "train.py"
 EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
@@ -322,11 +322,12 @@ def reference_run(small: list[str], out: Path, engine: str) -> Path:
 
 @pytest.fixture(scope="module")
 def uninterrupted(small, tmp_path_factory) -> Path:
-    return reference_run(small, tmp_path_factory.mktemp("reference") / "run", "batched")
+    folder = shared_folder(tmp_path_factory, "train_script_reference",
+                           lambda root: reference_run(small, root / "run", "batched"))
+    return folder / "run"
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_reference")  # one worker makes the uninterrupted run
 @pytest.mark.parametrize(
     "patch,checkpoint,engine",
     [(KILL_MID_BATCH.format(when=3), 2, "batched"),  # killed in the 4th training episode: resumes after 2
@@ -415,7 +416,7 @@ BAD_VALUES = [
 def refused(small, tmp_path_factory) -> tuple[Path, list[tuple[int, str]]]:
     """Every case of :data:`BAD_VALUES` run by train.py (in one process: :func:`run_refusals`), each into
     its own run directory with its own snapshot cache."""
-    root = tmp_path_factory.mktemp("refused")
+    root = shared_folder(tmp_path_factory, "train_script_refused")
     kept = [o for o in small if not o.startswith("env.cache_dir=")]
     cases = [[*kept, "agent=dqn", "train.checkpoint_every=2", *override.split(),
               f"env.cache_dir={root / f'cache{i}'}", f"hydra.run.dir={root / f'run{i}'}"]
@@ -424,7 +425,6 @@ def refused(small, tmp_path_factory) -> tuple[Path, list[tuple[int, str]]]:
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_refusals")  # one worker runs the cases (the module fixture)
 @pytest.mark.parametrize("case", range(len(BAD_VALUES)), ids=[override for override, _ in BAD_VALUES])
 def test_bad_values_stop_before_sumo(refused, case):
     root, runs = refused
@@ -480,7 +480,6 @@ def test_unknown_experiment_lists_the_known_ones(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("train_reference")
 def test_a_corrupted_checkpoint_is_reported_on_resume(small, uninterrupted, tmp_path):
     import shutil
 
