@@ -12,9 +12,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from evcd.env import ENV_ID, ChargingNavEnv
-from evcd.scenario.scenario import JURONG_WEST, STATIONS_FILE
+from evcd.scenario.scenario import STATIONS_FILE
 from evcd.sim.driver import SumoDriver
-from tests.conftest import GRID_ENV, run_episode
+from tests.conftest import GRID_ENV
 
 
 @pytest.mark.slow
@@ -28,22 +28,6 @@ def test_check_env_passes_on_the_grid(grid_env_dir, env_cache):
     finally:
         env.close()
     assert SumoDriver.active() is None
-
-
-@pytest.mark.slow
-def test_check_env_passes_on_jurong_west(tmp_path):
-    if not (JURONG_WEST / STATIONS_FILE).is_file():
-        pytest.skip("the Jurong West scenario is not built yet")
-    # a short early window: the day's snapshots only need simulating to 06:10
-    env = gymnasium.make(ENV_ID, evs=200, departure_window=(6 * 3600, 6 * 3600 + 600), cache_dir=tmp_path)
-    try:
-        check_env(env.unwrapped)
-        for seed in range(3):
-            out = run_episode(env.unwrapped, seed)
-            assert out["terminated"] and out["info"]["reason"] == "charging", out["info"]
-            assert all(np.isfinite(o).all() for o in out["observations"])
-    finally:
-        env.close()
 
 
 def test_spaces_and_first_observation(make_env):
