@@ -16,7 +16,6 @@ other guided EVs driving there that are due before this one), both count ``G`` i
 due after this one does not delay it. The central rule then counts an EV it assigns at the tick for
 the EVs after it only where it is due first (its drive time to the station, ``T`` where observed,
 else the queue-aware guess from ``D`` and ``N``, below theirs).
-
 """
 
 from __future__ import annotations
