@@ -17,7 +17,7 @@ import argparse
 import gymnasium
 import numpy as np
 
-import evcd  # noqa: F401  (registers evcd/ChargingNav-v0)
+import evcd  # noqa: F401  (registers evcd/ChargingNav-v1)
 from evcd.loops.seeds import episode_spec
 
 #: The run seed whose evaluation episodes are played (``scripts/train.py seed=0``'s, on ``eval``).
@@ -32,7 +32,7 @@ def fewest_per_point(obs: np.ndarray, stations: int) -> int:
 
 def play(split: str, episodes: int, overrides: list[str]) -> float:
     """Mean travel time (s) of the rule over ``episodes`` episodes of ``split``."""
-    env = gymnasium.make("evcd/ChargingNav-v0", experiment="peak", split=split, overrides=overrides)
+    env = gymnasium.make("evcd/ChargingNav-v1", experiment="peak", split=split, overrides=overrides)
     stations = int(env.action_space.n)
     times = []
     try:

@@ -20,13 +20,13 @@ import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_checker import check_env
 
-import evcd  # noqa: F401  (registers evcd/ChargingNav-v0)
+import evcd  # noqa: F401  (registers evcd/ChargingNav-v1)
 from evcd.agents import make_agent_for_env
 from evcd.experiments import make_sweep_env
 from evcd.experiments.sb3 import SB3VecEnv
 from evcd.loops.seeds import episode_spec
 
-ENV_ID = "evcd/ChargingNav-v0"
+ENV_ID = "evcd/ChargingNav-v1"
 
 
 def make(split: str, overrides: list[str]) -> gymnasium.Env:

@@ -219,7 +219,7 @@ def loaded_after(statement: str) -> set[str]:
 
 
 def test_importing_the_package_registers_the_env_without_loading_it():
-    mods = loaded_after("import evcd, gymnasium\nassert 'evcd/ChargingNav-v0' in gymnasium.registry")
+    mods = loaded_after("import evcd, gymnasium\nassert 'evcd/ChargingNav-v1' in gymnasium.registry")
     assert "evcd.env" not in mods and "libsumo" not in mods and "torch" not in mods
 
 

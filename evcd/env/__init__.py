@@ -1,7 +1,7 @@
-"""The charging-navigation environment (Gymnasium id ``evcd/ChargingNav-v0``).
+"""The charging-navigation environment (Gymnasium id ``evcd/ChargingNav-v1``).
 
     import gymnasium, evcd
-    env = gymnasium.make("evcd/ChargingNav-v0", evs=300)
+    env = gymnasium.make("evcd/ChargingNav-v1", evs=300)
 
 Importing :mod:`evcd` registers the id (by its string entry point, see :mod:`evcd`).
 """

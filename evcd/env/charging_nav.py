@@ -1,6 +1,6 @@
-"""``evcd/ChargingNav-v0``: guide one EV to a charging station, one decision per time slot.
+"""``evcd/ChargingNav-v1``: guide one EV to a charging station, one decision per time slot.
 
-    env = gymnasium.make("evcd/ChargingNav-v0", evs=400)        # the committed Jurong West scenario
+    env = gymnasium.make("evcd/ChargingNav-v1", evs=400)        # the committed Jurong West scenario
     obs, info = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
 
@@ -10,6 +10,14 @@ window from a random origin. Every ``decision_interval`` seconds the agent sees 
 charging (it holds a charging point; queueing is not charging), with the reward of
 :mod:`evcd.env.reward`. It is truncated, never crashed, when the target teleported, vanished, is
 stuck, or exceeds ``max_travel_time``, or SUMO reports an error; ``info["reason"]`` says which.
+
+Version history:
+
+- ``v1`` (2026-11-29): the dynamics of ``v0``'s last state (commit a3e96b2), under an id that names
+  them from now on: every ``results.json`` records the id with evcd's version and commit.
+- ``v0`` (2026-11-22 to 2026-11-29, commits f6d6a86 to a3e96b2): the id through several changes of
+  behaviour (observations made through ``gymnasium.make`` became normalised; fixes changed episode
+  outcomes), so a result labelled ``v0`` is tied to its commit, not to the id. Refused now.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """evcd's experiments as data a Python user can load: the worlds of ``conf/experiment/`` per split.
 
-- :mod:`evcd.experiments.make`: :func:`make_env` (what ``gymnasium.make("evcd/ChargingNav-v0",
-  experiment=..., split=...)`` makes), :func:`parallel_env` and :func:`aec_env` (the fleet's
-  PettingZoo environment, parallel and AEC);
+- :mod:`evcd.experiments.make`: :func:`make_env` (what ``gymnasium.make("evcd/ChargingNav-v1",
+  experiment=..., split=...)`` makes), :func:`parallel_env` and :func:`env` (the fleet's
+  PettingZoo environment, parallel and AEC, by PettingZoo's factory names);
 - :func:`make_sweep_env`: the batched engine as a Gymnasium vector environment in an experiment's
   world (:mod:`evcd.env.sweep`); :mod:`evcd.experiments.sb3` puts it behind stable-baselines3's
   ``VecEnv`` (the optional extra ``.[sb3]``);
@@ -13,14 +13,14 @@
 """
 
 from evcd.experiments.compose import CONF_DIR, compose_experiment, experiment_names
-from evcd.experiments.make import aec_env, make_env, make_sweep_env, make_vector_env, parallel_env
+from evcd.experiments.make import env, make_env, make_sweep_env, make_vector_env, parallel_env
 from evcd.experiments.worlds import SPLITS, split_days, split_kwargs
 
 __all__ = [
     "CONF_DIR",
     "SPLITS",
-    "aec_env",
     "compose_experiment",
+    "env",
     "experiment_names",
     "make_env",
     "make_sweep_env",

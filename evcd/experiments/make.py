@@ -1,13 +1,13 @@
 """evcd's worlds for other people's algorithms: an experiment's environments from Python.
 
     import gymnasium, evcd
-    env = gymnasium.make("evcd/ChargingNav-v0", experiment="peak", split="train")   # the README's world
-    test = gymnasium.make("evcd/ChargingNav-v0", experiment="peak", split="eval")   # its held-out days
-    from evcd.experiments import parallel_env
-    fleet = parallel_env(experiment="fleet", split="eval", run_seed=0)            # the fleet table's
-    turns = aec_env(experiment="fleet", split="train")                             # its AEC form
+    env = gymnasium.make("evcd/ChargingNav-v1", experiment="peak", split="train")   # the README's world
+    test = gymnasium.make("evcd/ChargingNav-v1", experiment="peak", split="eval")   # its held-out days
+    from evcd import experiments
+    fleet = experiments.parallel_env(experiment="fleet", split="eval", run_seed=0)   # the fleet table's
+    turns = experiments.env(experiment="fleet", split="train")                       # its AEC form
 
-``make_env`` is what the Gymnasium id ``evcd/ChargingNav-v0`` makes. With an ``experiment`` (a file of
+``make_env`` is what the Gymnasium id ``evcd/ChargingNav-v1`` makes. With an ``experiment`` (a file of
 ``conf/experiment/``: :func:`~evcd.experiments.compose.experiment_names`) the environment is the one
 ``scripts/train.py experiment=<name>`` builds for the ``split`` (:mod:`evcd.experiments.worlds`:
 ``train``, ``tuning`` or ``eval``, each with its days and departure window) of run ``run_seed``
@@ -98,15 +98,16 @@ def parallel_env(
     return FleetEnv(**{**world, "normalize_obs": True, **kwargs})
 
 
-def aec_env(
+def env(
     experiment: str | None = None,
     split: str = "train",
     run_seed: int = 0,
     overrides: Sequence[str] = (),
     **kwargs: Any,
 ) -> AECEnv:
-    """:func:`parallel_env` in PettingZoo's AEC form (:func:`evcd.env.fleet.aec_env`: the agents due at
-    a tick act in turn, the tick runs when the last has acted; the same episodes)."""
+    """:func:`parallel_env` in PettingZoo's AEC form (:func:`evcd.env.fleet.env`, by PettingZoo's name for
+    the AEC factory: the agents due at a tick act in turn, the tick runs when the last has acted; the
+    same episodes)."""
     return parallel_to_aec(parallel_env(experiment, split, run_seed, overrides, **kwargs))
 
 

@@ -19,10 +19,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from evcd import ENV_ID, FLEET_ENV_ID
 from evcd.env.runners.base import EpisodeRow
 from evcd.loops.machine import machine_record
 from evcd.loops.stats import EvalResult
 from evcd.utils.atomic import atomic_write_json, atomic_write_text, json_floats
+from evcd.utils.provenance import code_record
 
 CHECKPOINTS = "checkpoints"
 TENSORBOARD = "tensorboard"
@@ -94,19 +96,27 @@ def write_episodes_csv(result: EvalResult, path: str | Path, overwrite: bool = F
     return atomic_write_text(path, episodes_csv_text(result.rows))
 
 
+#: The versioned id of each task's environment (Gymnasium's for the single target, PettingZoo's name for
+#: the fleet), as ``results.json`` records it.
+ENVIRONMENTS = {"single": ENV_ID, "fleet": FLEET_ENV_ID}
+
+
 def results_dict(result: EvalResult, config: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The content of ``results.json``: task, agent, seed, summary, per-episode rows, optional config,
-    the agent's own extras (:attr:`EvalResult.extra`, e.g. ``hindsight``) and the machine the numbers
-    were computed on (:func:`~evcd.loops.machine.machine_record`)."""
+    """The content of ``results.json``: task, the environment's versioned id, agent, seed, summary,
+    per-episode rows, optional config, the agent's own extras (:attr:`EvalResult.extra`, e.g.
+    ``hindsight``), the code (evcd's version and commit: :func:`~evcd.utils.provenance.code_record`) and
+    the machine the numbers were computed on (:func:`~evcd.loops.machine.machine_record`)."""
     return json_floats(
         {
             "task": result.task,
+            "environment": ENVIRONMENTS[result.task],
             "agent": result.agent,
             "seed": result.seed,
             "summary": dataclasses.asdict(result.summary),
             "episodes": [r.row() for r in result.rows],
             "config": dict(config) if config is not None else None,
             **result.extra,
+            "code": code_record(),
             "machine": machine_record(),
         }
     )

@@ -30,6 +30,12 @@ def test_check_env_passes_on_the_grid(grid_env_dir, env_cache):
     assert SumoDriver.active() is None
 
 
+def test_the_id_is_versioned_and_an_older_version_is_refused_naming_todays():
+    assert ENV_ID == "evcd/ChargingNav-v1"
+    with pytest.raises(gymnasium.error.DeprecatedEnv, match="evcd/ChargingNav-v1"):
+        gymnasium.make("evcd/ChargingNav-v0")
+
+
 def test_spaces_and_first_observation(make_env):
     env = make_env()
     m = len(env.stations)

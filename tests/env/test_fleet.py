@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from pettingzoo.test import api_test, parallel_api_test
 
-from evcd.env.fleet import FleetEnv, aec_env, draw_guided, in_window, read_charging_trips
+from evcd.env import fleet
+from evcd.env.fleet import FleetEnv, draw_guided, in_window, read_charging_trips
 from evcd.env.fleet.trips import ChargingTrip
 from tests.conftest import FLEET_DEMAND, FLEET_WINDOW
 from tests.env.handmade import ev, write_routes
@@ -72,14 +73,15 @@ def test_parallel_api_test_passes(make_fleet) -> None:
     env = make_fleet(guided_share=0.5)
     parallel_api_test(env, num_cycles=400)
     assert env.observation_space(env.possible_agents[0]).shape == (4 * len(env.stations),)
+    assert env.metadata["name"] == "evcd_fleet_v1"  # PettingZoo's versioned name
 
 
 @pytest.mark.slow
 def test_the_aec_form_passes_pettingzoos_api_test_and_plays_the_parallel_episodes(
     make_fleet, grid_env_dir, env_cache
 ) -> None:
-    aec = aec_env(scenario=grid_env_dir, cache_dir=env_cache, demand=FLEET_DEMAND,
-                  departure_window=FLEET_WINDOW, guided_share=0.5)  # fmt: skip
+    aec = fleet.env(scenario=grid_env_dir, cache_dir=env_cache, demand=FLEET_DEMAND,
+                    departure_window=FLEET_WINDOW, guided_share=0.5)  # fmt: skip
     try:
         api_test(aec, num_cycles=400)
         # every agent picks its nearest station, in turn; the tick runs when the last has acted

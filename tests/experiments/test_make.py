@@ -15,12 +15,11 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import api_test, parallel_api_test
 
-from evcd import ENV_ID
+from evcd import ENV_ID, experiments
 from evcd.agents import make_agent_for_env
 from evcd.env.runners import FleetRunner
 from evcd.experiments import (
     SPLITS,
-    aec_env,
     compose_experiment,
     experiment_names,
     make_sweep_env,
@@ -145,7 +144,7 @@ def test_the_fleet_experiment_plays_the_scripts_evaluation_episodes(script_overr
         parallel_api_test(env, num_cycles=200)
         rule = make_agent_for_env("queue_aware", env, np.random.default_rng(0))
         played = runner.run([fleet_spec(0, i, len(env.days)) for i in range(2)], rule)
-    aec = aec_env(experiment="fleet", split="eval", overrides=[*script_overrides, *FLEET_WORLD])
+    aec = experiments.env(experiment="fleet", split="eval", overrides=[*script_overrides, *FLEET_WORLD])
     try:
         assert aec.unwrapped.config == env.config
         api_test(aec, num_cycles=100)

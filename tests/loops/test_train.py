@@ -27,6 +27,7 @@ from evcd.loops.train import TrainSettings, train_and_evaluate, training_specs
 from evcd.loops.train_state import check_run_dir, restore_training
 from evcd.loops.validation import ValidationSettings
 from evcd.utils.checkpoint import CheckpointError, load_checkpoint
+from evcd.utils.provenance import code_record
 from tests.agents.toy_env import ToyDispatchEnv, greedy_travel, optimal_travel
 from tests.conftest import run_script
 
@@ -172,6 +173,7 @@ def test_results_json_holds_training_evaluation_and_the_paired_comparison(traine
     assert t["target_updates"] == agent.target_updates == agent.gradient_steps // SMALL["target_update"]
     assert t["wall_s"] > 0 and t["transitions_per_second"] > 0
     assert data["agent"] == "dueling_ddqn" and set(data["baselines"]) == {"greedy"}
+    assert data["environment"] == "evcd/ChargingNav-v1" and data["code"] == code_record()
     paired = data["baselines"]["greedy"]["paired"]
     agent_t = [float(r["travel_time"]) for r in read_csv(run_dir / "episodes.csv")]
     base_t = [float(r["travel_time"]) for r in read_csv(run_dir / "baseline_greedy_episodes.csv")]

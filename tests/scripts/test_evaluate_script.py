@@ -7,6 +7,7 @@ import inspect
 import json
 import subprocess
 from dataclasses import asdict
+from importlib.metadata import version
 from pathlib import Path
 
 import pytest
@@ -20,7 +21,8 @@ from evcd.experiments.worlds import demand_config, env_kwargs, fleet_kwargs
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.loops.run_files import CSV_FIELDS
 from evcd.scenario.demand import DemandConfig
-from tests.conftest import CONF, compose_config, run_refusals, run_script, shared_folder
+from evcd.utils.provenance import git_commit
+from tests.conftest import CONF, ROOT, compose_config, run_refusals, run_script, shared_folder
 
 #: A fleet on the script grid: enough charging EVs departing 06:00-07:00 to guide.
 FLEET = ["task=fleet", "evs=300", "scenario.demand.charging_share=0.6", "env.departure_window=[21600,25200]",
@@ -111,6 +113,10 @@ def test_evaluate_end_to_end(small, tmp_path):
     data = json.loads((out / "results.json").read_text())
     assert {"agent", "seed", "summary", "episodes", "config"} <= set(data)
     assert data["agent"] == "random" and data["seed"] == 4 and data["config"]["episodes"] == 2
+    # which environment and which code made the numbers (this checkout's commit)
+    assert data["environment"] == "evcd/ChargingNav-v1"
+    commit, dirty = git_commit(ROOT)
+    assert data["code"] == {"evcd": version("evcd"), "commit": commit, "dirty": dirty}
     s = data["summary"]
     assert {"mean_travel_time", "median_travel_time", "ci_low", "ci_high", "truncated", "mean_wall_s"} <= set(
         s
@@ -235,6 +241,7 @@ def test_evaluate_a_fleet_end_to_end(small, tmp_path):
     s = data["summary"]
     assert s["guided_travel"] == pytest.approx(float(rows[0]["guided_travel"]))
     assert data["config"]["task"] == "fleet" and data["config"]["fleet"]["guided_share"] == 0.5
+    assert data["environment"] == "evcd_fleet_v1" and data["code"]["evcd"] == version("evcd")
     assert (out / "fleet_trace.png").stat().st_size > 10_000
     assert "guided EVs" in proc.stdout + proc.stderr
 

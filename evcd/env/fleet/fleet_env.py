@@ -36,6 +36,15 @@ stations (nobody dispatches them), and ``oracle`` is refused (the guided EVs cha
 future). Reward per agent and slot: the single environment's (``"time"`` by default: minus the slot's
 hours, so that an agent's rewards sum to minus its travel time: an agent's first slot runs from its
 departure; the step in which it appears gives it 0).
+
+Version history (``metadata["name"]``, PettingZoo's versioned name):
+
+- ``evcd_fleet_v1`` (2026-11-29): the dynamics of ``evcd_fleet_v0``'s last state (commit a3e96b2),
+  under a name that ties a result to them from now on (every ``results.json`` records it with evcd's
+  version and commit); ``env()`` (PettingZoo's AEC factory) beside ``parallel_env()``.
+- ``evcd_fleet_v0`` (2026-11-24 to 2026-11-29): the name through changes of behaviour (among them an
+  EV sent elsewhere while crossing a junction losing its new stop, fixed in 0756257); a result
+  labelled ``v0`` is tied to its commit, not to the name.
 """
 
 from __future__ import annotations
@@ -53,6 +62,7 @@ from gymnasium.utils import seeding
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from evcd import FLEET_ENV_ID
 from evcd.env.config import EnvConfig
 from evcd.env.episode_rules import TIME_EPS, Motion, check_action, slot_end_reason
 from evcd.env.fleet.events import advance, heading
@@ -105,7 +115,7 @@ class FleetEnv(InWorld, ParallelEnv):
     guided EVs' SUMO ids. libsumo runs one simulation per process: one fleet per process.
     """
 
-    metadata = {"name": "evcd_fleet_v0", "render_modes": [], "is_parallelizable": True}  # noqa: RUF012
+    metadata = {"name": FLEET_ENV_ID, "render_modes": [], "is_parallelizable": True}  # noqa: RUF012
 
     def __init__(
         self,
@@ -437,8 +447,8 @@ def parallel_env(**kwargs: Any) -> FleetEnv:
     return FleetEnv(**kwargs)
 
 
-def aec_env(**kwargs: Any) -> AECEnv:
-    """The fleet in PettingZoo's AEC form (its conversion of :class:`FleetEnv`): the agents due at a
-    tick act one after the other, and the tick is simulated when the last of them has acted, so the
-    episodes are the parallel form's."""
+def env(**kwargs: Any) -> AECEnv:
+    """The fleet in PettingZoo's AEC form (its conversion of :class:`FleetEnv`; PettingZoo's name for
+    the AEC factory): the agents due at a tick act one after the other, and the tick is simulated when
+    the last of them has acted, so the episodes are the parallel form's."""
     return parallel_to_aec(FleetEnv(**kwargs))
