@@ -3,8 +3,9 @@
 
 The defaults were chosen for the default regime (``experiment=peak``: the ``time`` reward, minus
 hours per slot) on its tuning seed 100 and tuning days 2 and 5 only, among seven candidates, and
-checked on tuning seed 101 (README "PPO"): the station network, lr 1e-3, rollouts of 128 transitions,
-10 epochs of minibatches of 32.
+checked on tuning seed 101 (docs/guide/reproduce-the-paper.md, "PPO"; the tuning table is in
+docs/NOTES.md): the station network, lr 1e-3, rollouts of 128 transitions, 10 epochs of minibatches
+of 32.
 """
 
 from __future__ import annotations

@@ -1,11 +1,12 @@
 """What a run's numbers were computed on, for its ``results.json``: the CPU, the instruction set torch's
 kernels use on it, torch's threads, and the versions of the packages that shape the numbers.
 
-A run is a function of its settings and its seed on one machine (README "Same seed, same result"), but
-a learner's numbers also depend on how its floating-point kernels round, and torch picks its kernels
-by the CPU's instruction set: the same seed and code gave another policy on an AVX-512 CPU than on the
-machines before it (whose CPUs and package versions were not recorded), and on that CPU
-``ATEN_CPU_CAPABILITY=avx2`` alone gave another again, while the rules' episodes were identical.
+A run is a function of its settings and its seed on one machine (docs/guide/getting-started.md, "Same
+seed, same result"), but a learner's numbers also depend on how its floating-point kernels round, and
+torch picks its kernels by the CPU's instruction set: the same seed and code gave another policy on an
+AVX-512 CPU than on the machines before it (whose CPUs and package versions were not recorded), and on
+that CPU ``ATEN_CPU_CAPABILITY=avx2`` alone gave another again, while the rules' episodes were
+identical.
 Recording the machine with the numbers lets a reader tell a difference of machine from one of code.
 """
 

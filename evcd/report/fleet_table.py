@@ -209,7 +209,7 @@ def fleet_markdown(collection: Collection) -> str:
     seeds = sorted({j.seed for j in jobs})
     days = sorted({d for j in jobs for d in j.eval_days})
     lines = [
-        "## The fleet table",
+        "# The fleet table",
         "",
         f"{len(jobs)} jobs from {', '.join(map(str, collection.sources))}; seeds {seeds}; "
         f"{sorted({j.episodes for j in jobs})} evaluation fleet episodes per job on days {days}.",
@@ -226,7 +226,7 @@ def fleet_markdown(collection: Collection) -> str:
         rows = [[*_cell_label(c, regimes), *(format_stat(cell_stat(jobs, c, a, measure)) for a in agents)]
                 for c in cells]  # fmt: skip
         lines += [
-            f"### Mean travel time of {label} (s)",
+            f"## Mean travel time of {label} (s)",
             "",
             "Per job the mean over its fleet episodes of the episode's mean; mean over seeds [95% Student-t "
             "interval across seeds].",
@@ -249,7 +249,7 @@ def fleet_markdown(collection: Collection) -> str:
                     per_seed.append([f"{a} - {b}", *_cell_label(c, regimes), per_seed_text(p)])
                 rows.append([*_cell_label(c, regimes), *cells_out])
             lines += [
-                f"### Paired differences on {label} (s)",
+                f"## Paired differences on {label} (s)",
                 "",
                 "A - B on the same fleet episodes: per seed the mean over episodes of the difference of the "
                 "episode means, then the mean over seeds [95% Student-t interval across seeds]; then in how "
@@ -276,7 +276,7 @@ def fleet_markdown(collection: Collection) -> str:
                 f"{trained} / {steps} / {num(minutes)}" if trained else "—",
             ])  # fmt: skip
     lines += [
-        "### Per dispatcher",
+        "## Per dispatcher",
         "",
         "Over the seeds of each cell: guided EVs truncated, the mean herding (largest share of the guided "
         "EVs of a 10-minute bin sent to one station) and queue wait (s), the guided EVs' mean travel time "

@@ -124,19 +124,19 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     out = make_fleet_table([sweep], tmp_path / "out")
     md = out.markdown
     assert len(out.collection.jobs) == len(AGENTS) * len(SEEDS) * len(SHARES) and not out.collection.gaps
-    assert row(md, "### Paired differences on the guided EVs", ["400", "1"])[
+    assert row(md, "## Paired differences on the guided EVs", ["400", "1"])[
         "dueling_ddqn - central"
     ].startswith("-20.0 [")
     # the cell: mean over seeds of the jobs' means, t interval across seeds
     half = T_0975_2 * 5.0 / math.sqrt(3)  # SPREAD's sd is 5
-    cell = row(md, "### Mean travel time of the guided EVs", ["400", "0.5"])
+    cell = row(md, "## Mean travel time of the guided EVs", ["400", "0.5"])
     assert cell["queue_aware"] == f"300.0 [{300 - half:.1f}, {300 + half:.1f}] n=3"
-    everybody = row(md, "### Mean travel time of all EVs", ["400", "1"])
+    everybody = row(md, "## Mean travel time of all EVs", ["400", "1"])
     assert everybody["reservation"].startswith("750.0 [")
     # paired by seed and episode: dqn - queue_aware = base difference + the learner's noise per seed
     noise = NOISE["dqn"]
     sd = statistics.stdev(noise)
-    pair = row(md, "### Paired differences on the guided EVs", ["400", "1"])
+    pair = row(md, "## Paired differences on the guided EVs", ["400", "1"])
     low, high = -60.0 - T_0975_2 * sd / math.sqrt(3), -60.0 + T_0975_2 * sd / math.sqrt(3)
     assert pair["dqn - queue_aware"] == f"-60.0 [{low:+.1f}, {high:+.1f}] n=3; 6 / 0 of 6"
     p = paired_fleet(list(out.collection.jobs), ("fleet", 400, 1.0), "dueling_ddqn", "dqn", "guided_travel")
@@ -144,13 +144,13 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     assert p is not None and p.per_seed == pytest.approx(expected) and p.pairs == 6
     # all EVs: the same differences (all_travel = guided + 100 here)
     assert (
-        row(md, "### Paired differences on all EVs", ["400", "1"])["dqn - queue_aware"]
+        row(md, "## Paired differences on all EVs", ["400", "1"])["dqn - queue_aware"]
         == pair["dqn - queue_aware"]
     )
-    detail = row(md, "### Per dispatcher", ["400", "0.5", "reservation"])
+    detail = row(md, "## Per dispatcher", ["400", "0.5", "reservation"])
     assert detail["truncated"] == "3 of 60" and detail["training"] == "—"
     assert detail["with truncated"] == f"{BASE['reservation', 0.5] + 50.0:.1f}"  # SPREAD and OFFSETS: mean 0
-    assert row(md, "### Per dispatcher", ["400", "0.5", "dqn"])["training"] == "180 / 27000 / 75.0"
+    assert row(md, "## Per dispatcher", ["400", "0.5", "dqn"])["training"] == "180 / 27000 / 75.0"
     # the csv: one row per job; the figure is a real PNG
     rows = list(csv.DictReader(io.StringIO((tmp_path / "out" / CSV_NAME).read_text())))
     assert len(rows) == len(AGENTS) * 6 and {r["eval_days"] for r in rows} == {"101 102"}
@@ -167,8 +167,8 @@ def test_runs_made_before_the_censored_measure_leave_its_cell_empty(tmp_path) ->
     del data["summary"]["guided_travel_censored"]
     job.write_text(json.dumps(data))
     md = make_fleet_table([sweep], tmp_path / "out").markdown
-    assert row(md, "### Per dispatcher", ["400", "0.5", "reservation"])["with truncated"] == "—"
-    assert row(md, "### Per dispatcher", ["400", "1", "reservation"])["with truncated"] != "—"
+    assert row(md, "## Per dispatcher", ["400", "0.5", "reservation"])["with truncated"] == "—"
+    assert row(md, "## Per dispatcher", ["400", "1", "reservation"])["with truncated"] != "—"
 
 
 def test_a_nan_episode_is_left_out_of_its_pairs(tmp_path) -> None:
@@ -210,7 +210,7 @@ def test_make_table_fleet_on_the_command_line(tmp_path) -> None:
     sweep = write_fleet_sweep(tmp_path / "sweep", agents=("queue_aware", "dueling_ddqn"))
     proc = run_script("make_table.py", "--fleet", str(sweep), "--out", str(tmp_path / "out"), timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "### Paired differences on the guided EVs" in proc.stdout
+    assert "## Paired differences on the guided EVs" in proc.stdout
     assert (tmp_path / "out" / BARS_PNG).exists()
     proc = run_script("make_table.py", str(sweep), "--out", str(tmp_path / "single"), timeout=300)
     assert proc.returncode == 2 and "make_table.py --fleet" in proc.stderr  # another kind: bad input

@@ -58,7 +58,7 @@ from evcd.env.runners.live import TARGET_VTYPE, LiveTarget, TargetIds
 from evcd.env.target import Target, TargetPlan
 from evcd.utils.validation import check_int
 
-#: Default number of targets per simulation. Measured (README, the batched engine): the travel
+#: Default number of targets per simulation. Measured (docs/NOTES.md, the batched engine): the travel
 #: times drift from the single environment's as batches grow (25: greedy within 1.4 %; 100: 3 %;
 #: 400 targets to one station jam it), while the cost per episode is nearly flat from 25 to 400
 #: when a call brings hundreds of episodes (batches are consecutive slices of the departure window).
