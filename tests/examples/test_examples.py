@@ -70,3 +70,25 @@ def test_torchrl_trains_a_shared_policy_on_the_fleet(script_overrides) -> None:
     assert all(int(r[1]) > 0 for r in rows) and sum(int(r[2]) for r in rows) > 0
     assert all(0 < float(r[3]) < 7200 for r in rows)
     assert re.search(r"^policy weights changed by [0-9.e+-]+ \(L2\)$", proc.stdout, re.M), proc.stdout
+
+
+@pytest.mark.slow
+def test_the_cleanrl_style_dqn_trains_on_the_sweep_beside_the_rule(script_overrides, tmp_path):
+    """The single-file DQN on the batched engine (grid world): it counts its decisions over every
+    target, logs the ended episodes' travel times and its TD loss, and plays the held-out episodes."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    overrides = [a for o in script_overrides for a in ("--override", o)]
+    tiny = ["--decisions", "160", "--envs", "4", "--learning-starts", "40", "--episodes", "2",
+            "--logdir", str(tmp_path)]  # fmt: skip
+    proc = run_script("../examples/cleanrl_dqn.py", *tiny, *overrides)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert re.search(r"^trained 160 decisions in \d+ s", proc.stdout, re.M), proc.stdout
+    held_out = re.search(r"^held-out: DQN ([0-9.]+) s, queue_aware ([0-9.]+) s on the same 2 episodes$",
+                         proc.stdout, re.M)  # fmt: skip
+    assert held_out is not None and all(0 < float(v) < 7200 for v in held_out.groups()), proc.stdout
+    (run,) = tmp_path.iterdir()
+    acc = EventAccumulator(str(run))
+    acc.Reload()
+    assert {"charts/travel_time", "losses/td_loss", "charts/epsilon"} <= set(acc.Tags()["scalars"])
+    assert all(0 < e.value < 7200 for e in acc.Scalars("charts/travel_time"))

@@ -1,4 +1,4 @@
-"""An agent written outside evcd (tests/outside/evcd_tiny_learner.py) plugs in through the public
+"""An agent written outside evcd (examples/outside_agent/evcd_tiny_learner.py) plugs in through the public
 registry: installed as a package with an entry point in the group ``evcd.agents`` (a ``.dist-info``
 folder on ``PYTHONPATH``, what pip writes), ``scripts/train.py agent=tiny`` trains it on the single
 target and on the fleet, a killed run resumes to the same weights, and ``scripts/evaluate.py``
@@ -22,7 +22,7 @@ from tests.conftest import ROOT, SCRIPTS, compose_config
 from tests.scripts.test_train_fleet_script import FLEET
 from tests.scripts.test_train_script import KILL_MID_BATCH, KILLER, read_csv
 
-OUTSIDE = Path(__file__).resolve().parents[1] / "outside"
+OUTSIDE = ROOT / "examples" / "outside_agent"
 #: A tiny run of the single target (the default regime, peak, on the grid).
 SINGLE = ["agent=tiny", "train.episodes=6", "train.checkpoint_every=2", "batch_episodes=2", "eval.episodes=2",
           "eval.bootstrap_resamples=200"]  # fmt: skip
