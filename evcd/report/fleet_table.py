@@ -30,10 +30,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from evcd.loops.run_files import ENVIRONMENTS
 from evcd.report.figures import agent_colors, plot_results_bars, plot_validation_curves
 from evcd.report.markdown import format_stat, markdown_table, num
 from evcd.report.paired import PairedStat, paired_cell, paired_stat, per_seed_text
 from evcd.report.seed_stats import SeedStat, seed_interval
+from evcd.report.stamp import JobStamp, job_stamp, stamp_markdown
 from evcd.report.sweep import Collection, ResultsError, WrongTaskError, collect, world_label
 from evcd.report.table import GAP_RULE, validation_gaps, validation_points, validation_rule_means
 from evcd.utils.atomic import atomic_write_text
@@ -83,6 +85,10 @@ class FleetJob:
     train_transitions: int
     train_wall_s: float
     eval_days: tuple[int, ...]
+    environment: str  # the environment's versioned id; the four provenance columns: evcd.report.stamp
+    evcd: str
+    commit: str
+    machine: str
     job_dir: Path
     #: every guided EV, truncated ones at their truncation (NaN for runs made before the measure)
     guided_travel_censored: float = math.nan
@@ -92,6 +98,11 @@ class FleetJob:
     validation: tuple[tuple[int, float], ...] = dataclasses.field(default=(), repr=False)
     #: the rules' means on the same validation episodes, by rule
     validation_rules: tuple[tuple[str, float], ...] = dataclasses.field(default=(), repr=False)
+
+    @property
+    def stamp(self) -> JobStamp:
+        """Where the job's numbers come from (environment, code, machine)."""
+        return JobStamp(self.environment, self.evcd, self.commit, self.machine)
 
     @property
     def key(self) -> tuple[str, int, float, str, int]:
@@ -138,6 +149,7 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
         train_transitions=int(training.get("transitions", 0)),
         train_wall_s=_float(training.get("wall_s", 0.0)),
         eval_days=tuple(sorted({d for _, d, _, _ in per_episode})),
+        **dataclasses.asdict(job_stamp(data)),
         job_dir=job_dir,
         guided_travel_censored=_float(summary.get("guided_travel_censored")),
         per_episode=per_episode,
@@ -215,6 +227,7 @@ def fleet_markdown(collection: Collection) -> str:
         f"{sorted({j.episodes for j in jobs})} evaluation fleet episodes per job on days {days}.",
         "",
     ]
+    lines += [*stamp_markdown([j.stamp for j in jobs], ENVIRONMENTS["fleet"]), ""]
     if collection.gaps:
         lines += [
             "Jobs that did not finish (left out):",

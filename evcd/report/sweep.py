@@ -31,6 +31,7 @@ from omegaconf import OmegaConf
 
 from evcd.env.observation import OPTIONS
 from evcd.loops.run_files import RESULTS_JSON
+from evcd.report.stamp import JobStamp, job_stamp
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +89,10 @@ class JobResult:
     train_days: tuple[int, ...]
     eval_days: tuple[int, ...]
     day_means: tuple[tuple[int, float], ...]  # per evaluation day: (day, mean travel time)
+    environment: str  # the environment's versioned id; the four provenance columns: evcd.report.stamp
+    evcd: str
+    commit: str
+    machine: str
     job_dir: Path
     #: per evaluation episode: (reset seed, travel time; NaN if truncated), for paired comparisons
     episode_travel: tuple[tuple[int, float], ...] = dataclasses.field(default=(), repr=False, compare=False)
@@ -95,6 +100,11 @@ class JobResult:
     validation: tuple[tuple[int, float], ...] = dataclasses.field(default=(), repr=False, compare=False)
     #: the rules' mean travel times on the same validation episodes, by rule
     validation_rules: tuple[tuple[str, float], ...] = dataclasses.field(default=(), repr=False, compare=False)
+
+    @property
+    def stamp(self) -> JobStamp:
+        """Where the job's numbers come from (environment, code, machine)."""
+        return JobStamp(self.environment, self.evcd, self.commit, self.machine)
 
     @property
     def key(self) -> tuple[str, str, int, int]:
@@ -284,6 +294,7 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
         train_days=day_list((config.get("train") or {}).get("days")),
         eval_days=tuple(played) if played else day_list(configured),
         day_means=tuple(day_means),
+        **dataclasses.asdict(job_stamp(data)),
         job_dir=job_dir,
         episode_travel=travel,
         validation=tuple(

@@ -33,11 +33,12 @@ from typing import Any
 import numpy as np
 
 from evcd.env.runners.base import EpisodeRow
-from evcd.loops.run_files import TRAIN_CSV, read_episodes_csv
+from evcd.loops.run_files import ENVIRONMENTS, TRAIN_CSV, read_episodes_csv
 from evcd.report.figures import agent_colors, plot_results_bars, plot_training_curves, plot_validation_curves
 from evcd.report.markdown import format_stat, markdown_table, num
 from evcd.report.paired import paired_markdown
 from evcd.report.seed_stats import MIN_GAP_S, SeedStat, gap_share, seed_interval
+from evcd.report.stamp import stamp_markdown
 from evcd.report.sweep import Collection, JobResult, ResultsError, collect
 from evcd.utils.atomic import atomic_write_text
 
@@ -272,6 +273,7 @@ def results_markdown(
         + ", ".join(f"`{s}`" for s in collection.sources)
         + ".",
     ]
+    lines += ["", *stamp_markdown([j.stamp for j in jobs], ENVIRONMENTS["single"])]
     for regime, group in _by_regime(jobs).items():
         lines += ["", f"## Regime `{regime}`", "", _jobs_line(group), ""]
         lines += [*_main_table(group), "", *_gap_table(group, rng, resamples), "", *_detail_table(group)]

@@ -124,6 +124,8 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     out = make_fleet_table([sweep], tmp_path / "out")
     md = out.markdown
     assert len(out.collection.jobs) == len(AGENTS) * len(SEEDS) * len(SHARES) and not out.collection.gaps
+    # jobs written without the environment's and the code's records: the page says so before anything
+    assert "**Made with another environment than today's `evcd_fleet_v1`**" in md.split("## ")[0]
     assert row(md, "## Paired differences on the guided EVs", ["400", "1"])[
         "dueling_ddqn - central"
     ].startswith("-20.0 [")

@@ -3,6 +3,7 @@ and a run refused before its start leaves no directory behind (``evcd.cli.run_re
 
 from __future__ import annotations
 
+import csv
 import subprocess
 import sys
 import textwrap
@@ -10,7 +11,10 @@ from pathlib import Path
 
 import pytest
 
+from evcd import ENV_ID
 from evcd.cli.run_record import discard_refused_run_dir
+from evcd.report.stamp import NOT_RECORDED
+from evcd.utils.provenance import code_record
 from tests.conftest import SCRIPTS, run_script, shared_folder
 from tests.scripts.test_train_script import KILL_MID_BATCH, KILLER
 
@@ -51,6 +55,12 @@ def test_a_refused_run_leaves_the_record_of_the_run_it_refused(sweep, script_ove
     table = run_script("make_table.py", str(sweep), "--out", str(tmp_path / "table"))
     assert table.returncode == 0, table.stderr[-2000:]  # both jobs still found through their records
     assert "2 of 2 expected jobs finished" in table.stdout + table.stderr
+    page = (tmp_path / "table" / "results.md").read_text()  # stamped with what made it: today's code
+    assert f"- Environment: `{ENV_ID}`" in page and "another environment" not in page
+    assert f"evcd: `{code_record()['evcd']}`, commit `{code_record()['commit']}" in page
+    with open(tmp_path / "table" / "results.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {r["environment"] for r in rows} == {ENV_ID} and {r["commit"] for r in rows} != {NOT_RECORDED}
 
 
 @pytest.mark.slow

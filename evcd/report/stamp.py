@@ -1,0 +1,90 @@
+"""What made a table: the environment's version, evcd's version and commit, and the machine of each job.
+
+    stamp = job_stamp(results_json)               # one job's, from its parsed results.json
+    lines = stamp_markdown(stamps, "evcd/ChargingNav-v1")
+
+Every results page says which environment version, which code and which machine its numbers come from,
+read from the ``environment``, ``code`` and ``machine`` records of its jobs' ``results.json``
+(:mod:`evcd.loops.run_files`). A job made before those records existed reads ``not recorded``; a page
+whose jobs ran on another version of the environment than today's says so in its first lines, so that
+a reader never takes an old number for today's dynamics.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+#: What a field reads where a job's ``results.json`` has no record of it (made by older code).
+NOT_RECORDED = "not recorded"
+
+
+@dataclass(frozen=True)
+class JobStamp:
+    """Where one job's numbers come from.
+
+    Attributes:
+        environment: the environment's versioned id (``evcd/ChargingNav-v1``, ``evcd_fleet_v1``).
+        evcd: evcd's version.
+        commit: the git commit (full hash), ``not a git checkout`` or :data:`NOT_RECORDED`; with
+            ``+ uncommitted changes`` where the checkout differed from it.
+        machine: the CPU, the instruction set torch's kernels used and torch's version.
+    """
+
+    environment: str = NOT_RECORDED
+    evcd: str = NOT_RECORDED
+    commit: str = NOT_RECORDED
+    machine: str = NOT_RECORDED
+
+
+def job_stamp(data: Mapping[str, Any]) -> JobStamp:
+    """The :class:`JobStamp` of a job's parsed ``results.json`` (:data:`NOT_RECORDED` where a record is
+    missing)."""
+    code = data.get("code") if isinstance(data.get("code"), Mapping) else {}
+    commit = str(code.get("commit", NOT_RECORDED))
+    if code.get("dirty"):
+        commit += " + uncommitted changes"
+    machine = data.get("machine")
+    if isinstance(machine, Mapping):
+        torch = (machine.get("packages") or {}).get("torch", "?")
+        where = f"{machine.get('cpu', '?')} ({machine.get('cpu_capability', '?')}), torch {torch}"
+    else:
+        where = NOT_RECORDED
+    return JobStamp(
+        environment=str(data.get("environment", NOT_RECORDED)),
+        evcd=str(code.get("evcd", NOT_RECORDED)),
+        commit=commit,
+        machine=where,
+    )
+
+
+def _values(counts: Counter[str], total: int) -> str:
+    if len(counts) == 1:
+        return f"`{next(iter(counts))}`"
+    return "; ".join(f"`{v}` ({n} of {total} jobs)" for v, n in sorted(counts.items()))
+
+
+def stamp_markdown(stamps: Sequence[JobStamp], current: str) -> list[str]:
+    """The page's provenance lines: each field's values over the jobs (with their counts where the jobs
+    differ), and a warning first where any job ran on another environment than ``current`` (today's
+    versioned id) or did not record it."""
+    total = len(stamps)
+    envs = Counter(s.environment for s in stamps)
+    lines: list[str] = []
+    older = total - envs.get(current, 0)
+    if older:
+        lines += [
+            f"**Made with another environment than today's `{current}`** ({older} of {total} jobs: "
+            f"{_values(envs, total)}): these numbers belong to the code named below, and a re-run with "
+            "today's code may differ.",
+            "",
+        ]
+    lines += [
+        f"- Environment: {_values(envs, total)}",
+        f"- evcd: {_values(Counter(s.evcd for s in stamps), total)}, commit "
+        f"{_values(Counter(s.commit for s in stamps), total)}",
+        f"- Machine: {_values(Counter(s.machine for s in stamps), total)}",
+    ]
+    return lines
