@@ -1,4 +1,4 @@
-"""The forecasters' errors on an experiment's held-out days (issue 31).
+"""The forecasters' errors on an experiment's held-out days.
 
     python scripts/forecast_errors.py                         # README regime: 400 EVs, morning peak, calm
     python scripts/forecast_errors.py perturbations=mixed     # the same days with every perturbation

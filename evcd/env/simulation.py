@@ -10,7 +10,7 @@ the stations' :class:`ChargingController`, and positions both at the target's de
   the simulation has reached, first restarts SUMO (:func:`needs_restart`). Two things make that
   necessary, both measured on SUMO 1.28:
 
-  * going back in time without a restart did not reproduce (issue 28, measured on the batched
+  * going back in time without a restart did not reproduce (2026-11-26, f87639c; measured on the batched
     engine): the same run gave other episodes from process to process, with the heap's layout
     (address space randomisation, the hash seed, an unrelated allocation, a day built earlier in
     the same process), and so did the learners trained on them. Each first difference traced

@@ -30,7 +30,7 @@ def test_the_site_builds_with_warnings_as_errors(tmp_path):
     assert "evcd.env.ChargingNavEnv" in api and "DQNConfig" in api  # the docstrings were read
 
 
-@pytest.mark.parametrize("card", ["charging_nav", "fleet"])
+@pytest.mark.parametrize("card", ["charging_nav", "fleet", "fleet_slots"])
 def test_each_environment_card_has_gymnasiums_sections(card):
     text = (DOCS / "envs" / f"{card}.md").read_text()
     found = re.findall(r"^## (.+)$", text, flags=re.M)
@@ -43,3 +43,8 @@ def test_each_card_names_todays_version():
 
     assert f"`{evcd.ENV_ID}`" in (DOCS / "envs" / "charging_nav.md").read_text()
     assert f"`{evcd.FLEET_ENV_ID}`" in (DOCS / "envs" / "fleet.md").read_text()
+    from evcd.env.fleet.slots import FleetSlots
+
+    slots = FleetSlots.metadata["name"]
+    assert slots.endswith(evcd.FLEET_ENV_ID.rsplit("_", 1)[1])  # the view carries the fleet's version
+    assert f"`{slots}`" in (DOCS / "envs" / "fleet_slots.md").read_text()

@@ -46,7 +46,7 @@ class FleetSlots(ParallelEnv):
             needs more raises an error naming the number).
     """
 
-    metadata = {"name": "evcd_fleet_slots_v0", "render_modes": [], "is_parallelizable": True}  # noqa: RUF012
+    metadata = {"name": "evcd_fleet_slots_v1", "render_modes": [], "is_parallelizable": True}  # noqa: RUF012
 
     def __init__(self, env: FleetEnv, slots: int) -> None:
         if not isinstance(env, FleetEnv):

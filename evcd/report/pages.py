@@ -1,0 +1,139 @@
+"""Regions of the documentation pages that are rendered from committed data, never typed.
+
+    python scripts/render_pages.py            # rewrite every generated region from the data
+    python scripts/render_pages.py --check    # list, cell by cell, where a page differs (exit 1)
+
+A page marks a generated region with two HTML comments (invisible on the rendered page)::
+
+    <!-- generated: results-headline -->
+    | EVs | random | ...
+    <!-- end generated -->
+
+and :data:`GENERATORS` maps the name to a function of the repository root that returns the region's
+Markdown from the data files committed beside the page (``docs/results.csv`` for the results table's
+headline). :func:`render_page` replaces every region of a page; :func:`differences` compares a page
+with its rendering line by line and, inside tables, cell by cell.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+
+from evcd.report.seed_stats import SeedStat, seed_interval
+from evcd.report.stamp import NOT_RECORDED
+
+BEGIN = re.compile(r"^<!-- generated: ([a-z0-9-]+) -->$")
+END = "<!-- end generated -->"
+#: The pages that hold generated regions, relative to the repository root.
+PAGES = ("README.md",)
+#: The headline table's columns, in the results page's order.
+HEADLINE_AGENTS = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
+
+
+class PageError(ValueError):
+    """A page's generated regions are malformed (unclosed, nested, unknown name)."""
+
+
+def _interval(stat: SeedStat) -> str:
+    return f"{stat.mean:.1f} [{stat.low:.1f}, {stat.high:.1f}]"
+
+
+def results_headline(root: Path) -> str:
+    """The results table's headline: mean travel time per EV count and dispatcher over the seeds of
+    ``docs/results.csv`` (the table's regime), with the 95% Student-t interval across seeds."""
+    by_cell: dict[tuple[int, str], list[float]] = defaultdict(list)
+    stamps = set()
+    with open(root / "docs" / "results.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            if row["regime"] == "table" and row["agent"] in HEADLINE_AGENTS:
+                by_cell[int(row["evs"]), row["agent"]].append(float(row["mean_travel_time"]))
+                stamps.add(tuple(row.get(k) or NOT_RECORDED for k in ("environment", "evcd", "commit")))
+    seeds = {len(v) for v in by_cell.values()}
+    lines = [
+        f"Mean travel time from departure to the start of charging (s), mean over {max(seeds)} seeds "
+        "[95% Student-t interval across seeds], in the paper's world:",
+        "",
+        "| EVs | " + " | ".join(HEADLINE_AGENTS) + " |",
+        "|---|" + "---:|" * len(HEADLINE_AGENTS),
+    ]
+    for evs in sorted({e for e, _ in by_cell}):
+        cells = [_interval(seed_interval(by_cell[evs, a])) for a in HEADLINE_AGENTS]
+        lines.append(f"| {evs} | " + " | ".join(cells) + " |")
+    if len(stamps) == 1 and NOT_RECORDED not in next(iter(stamps)):
+        env, version, commit = next(iter(stamps))
+        lines += ["", f"Made with `{env}`, evcd {version}, commit `{commit}`."]
+    else:
+        lines += ["", "Its rows do not all record one environment version and commit (they were made before "
+                  "results recorded them, or by several commits): the results page names the commits."]
+    return "\n".join(lines)
+
+
+#: Region name -> its renderer (of the repository root).
+GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_headline}
+
+
+def regions(text: str) -> list[tuple[str, int, int]]:
+    """``(name, first line, end line)`` of each generated region of ``text`` (0-based line numbers of
+    the content between the markers: ``lines[first:end]``).
+
+    Raises:
+        PageError: an unclosed, nested or unnamed region, or a name without a generator.
+    """
+    out, lines, open_at = [], text.splitlines(), None
+    name = ""
+    for i, line in enumerate(lines):
+        m = BEGIN.match(line.strip())
+        if m:
+            if open_at is not None:
+                raise PageError(f"line {i + 1}: region {m.group(1)!r} opens inside region {name!r}")
+            name, open_at = m.group(1), i + 1
+            if name not in GENERATORS:
+                raise PageError(f"line {i + 1}: no generator named {name!r}; the generators: "
+                                f"{', '.join(GENERATORS)}")  # fmt: skip
+        elif line.strip() == END:
+            if open_at is None:
+                raise PageError(f"line {i + 1}: {END} without a region to close")
+            out.append((name, open_at, i))
+            open_at = None
+    if open_at is not None:
+        raise PageError(f"line {open_at}: region {name!r} is never closed ({END})")
+    return out
+
+
+def render_page(text: str, root: Path) -> str:
+    """``text`` with every generated region's content rendered from the data under ``root``."""
+    lines = text.splitlines()
+    for name, first, end in reversed(regions(text)):
+        lines[first:end] = GENERATORS[name](root).splitlines()
+    return "\n".join(lines) + ("\n" if text.endswith("\n") else "")
+
+
+def _cells(line: str) -> list[str]:
+    return [c.strip() for c in line.strip().strip("|").split("|")]
+
+
+def differences(text: str, rendered: str, page: str = "page") -> list[str]:
+    """Where ``text`` differs from ``rendered``: one line per differing line, or per cell where both
+    are table rows of the same width (``page:line: column 'x': 'old' -> 'new'``)."""
+    old, new = text.splitlines(), rendered.splitlines()
+    out = []
+    header: list[str] = []
+    for i in range(max(len(old), len(new))):
+        a = old[i] if i < len(old) else "<missing>"
+        b = new[i] if i < len(new) else "<missing>"
+        if b.startswith("| ") and not b.startswith("|---"):
+            header = header if i > 0 and new[i - 1].startswith("|") else _cells(b)
+        if a == b:
+            continue
+        if a.startswith("|") and b.startswith("|") and len(_cells(a)) == len(_cells(b)):
+            for j, (x, y) in enumerate(zip(_cells(a), _cells(b), strict=True)):
+                if x != y:
+                    column = header[j] if j < len(header) else str(j + 1)
+                    out.append(f"{page}:{i + 1}: column {column!r} of row {_cells(b)[0]!r}: {x!r} -> {y!r}")
+        else:
+            out.append(f"{page}:{i + 1}: {a!r} -> {b!r}")
+    return out

@@ -1,0 +1,84 @@
+"""The documentation's generated regions (evcd.report.pages, scripts/render_pages.py): the committed
+pages are what their committed data renders, a difference is named cell by cell, and malformed regions
+are refused."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from pathlib import Path
+
+import pytest
+
+from evcd.report.pages import END, PAGES, PageError, differences, regions, render_page
+from tests.conftest import ROOT, run_script
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_every_committed_page_is_what_its_data_renders(page):
+    text = (ROOT / page).read_text()
+    assert regions(text), f"{page} has no generated region"
+    assert differences(text, render_page(text, ROOT), page) == []
+
+
+def test_the_headline_is_the_mean_over_seeds_of_the_committed_rows():
+    """One cell recomputed by hand from docs/results.csv: queue_aware at 400 EVs."""
+    with open(ROOT / "docs" / "results.csv", newline="") as f:
+        values = [float(r["mean_travel_time"]) for r in csv.DictReader(f)
+                  if (r["regime"], r["agent"], r["evs"]) == ("table", "queue_aware", "400")]  # fmt: skip
+    assert len(values) == 5
+    readme = (ROOT / "README.md").read_text()
+    assert f"| {sum(values) / 5:.1f} [" in readme.split("| 400 |")[1].split("\n")[0]
+
+
+def _copy_root(tmp_path: Path) -> Path:
+    root = tmp_path / "repo"
+    (root / "docs").mkdir(parents=True)
+    for page in PAGES:
+        shutil.copy(ROOT / page, root / page)
+    shutil.copy(ROOT / "docs" / "results.csv", root / "docs" / "results.csv")
+    return root
+
+
+def test_check_names_the_changed_cell_and_rendering_restores_it(tmp_path):
+    root = _copy_root(tmp_path)
+    csv_path = root / "docs" / "results.csv"
+    with open(csv_path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:  # greedy at 200 EVs becomes 100 s slower in every seed
+        if (r["agent"], r["evs"]) == ("greedy", "200"):
+            r["mean_travel_time"] = str(float(r["mean_travel_time"]) + 100.0)
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    check = run_script("render_pages.py", "--check", "--root", str(root))
+    assert check.returncode == 1, check.stderr[-2000:]
+    (line,) = check.stdout.splitlines()
+    assert "README.md:" in line and "column 'greedy' of row '200': '475.7 [341.7, 609.7]' -> '575.7 [" in line
+    assert run_script("render_pages.py", "--root", str(root)).returncode == 0
+    assert "575.7 [441.7, 709.7]" in (root / "README.md").read_text()
+    assert run_script("render_pages.py", "--check", "--root", str(root)).returncode == 0
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("<!-- generated: results-headline -->\nx\n", "never closed"),
+        (f"x\n{END}\n", "without a region"),
+        ("<!-- generated: nothing-such -->\n" + END, "no generator named 'nothing-such'"),
+        ("<!-- generated: results-headline -->\n" * 2 + END, "opens inside"),
+    ],
+)
+def test_malformed_regions_are_refused_with_their_line(text, message):
+    with pytest.raises(PageError, match=message):
+        regions(text)
+
+
+def test_a_malformed_page_exits_2_and_writes_nothing(tmp_path):
+    root = _copy_root(tmp_path)
+    broken = (root / "README.md").read_text().replace(END, "", 1)
+    (root / "README.md").write_text(broken)
+    proc = run_script("render_pages.py", "--root", str(root))
+    assert proc.returncode == 2 and "never closed" in proc.stderr
+    assert (root / "README.md").read_text() == broken
