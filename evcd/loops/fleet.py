@@ -55,8 +55,10 @@ class FleetSummary:
     Attributes:
         episodes: fleet episodes played.
         guided_travel: mean over episodes of the guided EVs' mean travel time (episodes where one
-            charged); ``guided_travel_ci`` its 95 % bootstrap interval.
-        all_travel: the same over every EV charging in the window; ``all_travel_ci`` its interval.
+            charged).
+        guided_travel_ci: its 95 % bootstrap interval.
+        all_travel: the same over every EV charging in the window.
+        all_travel_ci: its 95 % bootstrap interval.
         queue_wait, herding, guided_travel_censored: means over episodes (:mod:`evcd.env.fleet.measures`).
         guided, truncated, all_unfinished, transitions: totals over episodes.
         mean_wall_s: mean wall-clock seconds per episode.
