@@ -185,8 +185,9 @@ def expand_sweep(task_overrides: Sequence[str]) -> list[tuple[str, ...]]:
     return [tuple(combo) for combo in itertools.product(*axes.values())]
 
 
-def _canonical(overrides: Sequence[str]) -> frozenset[tuple[str, str]]:
-    """Overrides as (key, value) pairs, spelled as Hydra's parser spells them."""
+def canonical_overrides(overrides: Sequence[str]) -> frozenset[tuple[str, str]]:
+    """Overrides as (key, value) pairs, spelled as Hydra's parser spells them (``progress=false`` and
+    ``progress=False`` are one override)."""
     return frozenset((o.get_key_element(), o.get_value_element_as_str()) for o in _parse(overrides))
 
 
@@ -207,7 +208,8 @@ def _task_overrides(sweep_dir: Path) -> list[str]:
     return [str(o) for o in task or ()]
 
 
-def _job_overrides(job_dir: Path) -> tuple[str, ...]:
+def job_overrides(job_dir: Path) -> tuple[str, ...]:
+    """The overrides a run directory records (``.hydra/overrides.yaml``; none if it has no record)."""
     path = job_dir / OVERRIDES_YAML
     return tuple(str(o) for o in _load_yaml(path) or ()) if path.is_file() else ()
 
@@ -325,11 +327,11 @@ def _collect_sweep(sweep_dir: Path, parse: Parser) -> tuple[list[Any], list[JobG
     found: dict[frozenset[tuple[str, str]], list[Path]] = defaultdict(list)
     for path in sorted(sweep_dir.glob(f"*/{OVERRIDES_YAML.as_posix()}")):
         job_dir = path.parent.parent
-        found[_canonical(_job_overrides(job_dir))].append(job_dir)
+        found[canonical_overrides(job_overrides(job_dir))].append(job_dir)
     jobs: list[Any] = []
     gaps: list[JobGap] = []
     for combo in expected:
-        read = [read_job(d, combo, parse) for d in found.pop(_canonical(combo), [])]
+        read = [read_job(d, combo, parse) for d in found.pop(canonical_overrides(combo), [])]
         done = [r for r in read if not isinstance(r, JobGap)]
         if not read:
             gaps.append(JobGap("missing", combo, None, f"no job directory in {sweep_dir}"))
@@ -342,7 +344,7 @@ def _collect_sweep(sweep_dir: Path, parse: Parser) -> tuple[list[Any], list[JobG
             gaps += [r for r in read if isinstance(r, JobGap)]
     for dirs in found.values():  # not in the sweep's product (e.g. a run copied in): used, with a warning
         for job_dir in dirs:
-            r = read_job(job_dir, _job_overrides(job_dir), parse)
+            r = read_job(job_dir, job_overrides(job_dir), parse)
             log.warning("%s: not a job of the sweep %s; %s", job_dir, sweep_dir,
                         "ignored (no results)" if isinstance(r, JobGap) else "included")  # fmt: skip
             if not isinstance(r, JobGap):
@@ -371,7 +373,7 @@ def collect(
         if (d / MULTIRUN_YAML).is_file():
             more_jobs, more_gaps, n = _collect_sweep(d, parse)
         elif (d / RESULTS_JSON).is_file() or (d / ".hydra").is_dir():
-            r = read_job(d, _job_overrides(d), parse)
+            r = read_job(d, job_overrides(d), parse)
             more_jobs, more_gaps, n = ([], [r], 1) if isinstance(r, JobGap) else ([r], [], 1)
         else:
             raise ResultsError(f"{d}: neither a multirun directory (no {MULTIRUN_YAML}) nor a run directory "

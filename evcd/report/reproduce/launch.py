@@ -1,0 +1,186 @@
+"""Run a page's sweeps into an output folder, each a Hydra multirun of its script in a subprocess, timed.
+
+    manifest = open_output(page, out, extra)          # a new folder, or the resumable one of this page
+    run_sweeps(page, out, manifest, extra, hydra, scripts_dir)
+
+The subprocess is the script as a user runs it (``python scripts/train.py -m ...``), so Hydra's
+overrides pass through: ``hydra/launcher=joblib hydra.launcher.n_jobs=2`` runs two jobs at once, and
+``hydra/launcher=evcd_slurm`` submits the same jobs to a SLURM cluster (:func:`check_launcher` names
+the extra a missing plugin needs before anything starts). Each sweep goes to ``<out>/sweeps/<name>``,
+its output to ``<out>/logs/<name>.log``; ``<out>/reproduce.json`` records the page, the overrides and
+every launch with its command, wall time and exit code. Run again with the same ``--out``, a page
+runs only the jobs that have not finished (into ``<name>-resume<k>``; nothing already written is
+touched).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import logging
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from evcd.report.reproduce.found import job_groups, read_run_dir, run_dirs
+from evcd.report.reproduce.spec import Page, PageError, PageJob, Sweep, display, job_key
+from evcd.utils.atomic import atomic_write_text
+
+log = logging.getLogger(__name__)
+
+MANIFEST = "reproduce.json"
+SWEEPS = "sweeps"
+LOGS = "logs"
+#: Launcher option -> (the Hydra plugin it needs, the evcd extra that installs it; "" = installed with evcd).
+LAUNCHER_PLUGINS: dict[str, tuple[str, str]] = {
+    "joblib": ("hydra_plugins.hydra_joblib_launcher", ""),
+    "evcd_slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
+    "submitit_slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
+    "submitit_local": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
+    "evcd_ray": ("hydra_plugins.hydra_ray_launcher", "ray"),
+    "ray": ("hydra_plugins.hydra_ray_launcher", "ray"),
+    "ray_aws": ("hydra_plugins.hydra_ray_launcher", "ray"),
+}
+
+
+def _installed(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ImportError:  # a parent package is missing
+        return False
+
+
+def check_launcher(hydra: Sequence[str], installed: Callable[[str], bool] = _installed) -> None:
+    """Refuse a ``hydra/launcher=`` whose plugin is not installed, naming the extra that installs it.
+
+    Raises:
+        PageError: the plugin of the chosen launcher cannot be imported.
+    """
+    for override in hydra:
+        key, _, name = override.lstrip("+").partition("=")
+        if key != "hydra/launcher" or name not in LAUNCHER_PLUGINS:
+            continue
+        module, extra = LAUNCHER_PLUGINS[name]
+        if not installed(module):
+            how = f'pip install -e ".[{extra}]"' if extra else "pip install -e ."
+            raise PageError(f"hydra/launcher={name} needs the Hydra launcher plugin {module}, which is not "
+                            f"installed: {how}")  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------- the folder
+def _definition(page: Page) -> list[dict[str, Any]]:
+    return [{"name": s.name, "script": s.script, "overrides": list(s.overrides)} for s in page.sweeps]
+
+
+def open_output(page: Page, out: Path, extra: Sequence[str]) -> dict[str, Any]:
+    """The manifest of ``out``: a new one (``out`` does not exist: it is made), or the one of an earlier
+    run of the same page, sweeps and overrides (to resume).
+
+    Raises:
+        PageError: ``out`` exists and is not such a folder (nothing in it is touched).
+    """
+    path = Path(out) / MANIFEST
+    if Path(out).exists():
+        try:
+            manifest = json.loads(path.read_text())
+        except (OSError, ValueError):
+            raise PageError(f"{out} exists and is not a reproduction's folder (no readable {MANIFEST}): "
+                            "nothing there is overwritten; choose a new --out") from None  # fmt: skip
+        same = (manifest.get("page"), manifest.get("sweeps"), manifest.get("overrides")) == (
+            page.name,
+            _definition(page),
+            list(extra),
+        )
+        if not same:
+            before = " ".join(manifest.get("overrides") or []) or "none"
+            raise PageError(f"{out} holds a reproduction of page {manifest.get('page')!r} with other "
+                            f"sweeps or overrides ({before}): nothing there is overwritten; choose a new "
+                            "--out")  # fmt: skip
+        log.info("%s: resuming the reproduction of page %s", out, page.name)
+        return manifest
+    Path(out).mkdir(parents=True)
+    manifest = {"page": page.name, "definition": str(page.path), "sweeps": _definition(page),
+                "overrides": list(extra), "launches": []}  # fmt: skip
+    atomic_write_text(path, json.dumps(manifest, indent=1) + "\n")
+    return manifest
+
+
+def finished_keys(folder: Path) -> set[frozenset[tuple[str, str]]]:
+    """The job keys of the finished run directories under ``folder``."""
+    if not Path(folder).is_dir():
+        return set()
+    return {job_key(r.overrides) for r in map(read_run_dir, run_dirs(folder)) if r.results is not None}
+
+
+def _free_dir(root: Path, name: str) -> Path:
+    if not (root / name).exists():
+        return root / name
+    k = 1
+    while (root / f"{name}-resume{k}").exists():
+        k += 1
+    return root / f"{name}-resume{k}"
+
+
+def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[tuple[Sweep, list[str], int]]:
+    """What :func:`run_sweeps` would launch now: (sweep, arguments after the script without Hydra's
+    overrides and sweep folder, jobs), the whole sweep as the page writes it where none of its jobs
+    finished, else a multirun of the jobs left (:func:`evcd.report.reproduce.found.job_groups`)."""
+    done = finished_keys(Path(out) / SWEEPS)
+    plan: list[tuple[Sweep, list[str], int]] = []
+    for sweep in page.sweeps:
+        jobs = [PageJob(sweep, combo) for combo in sweep.jobs(extra)]
+        left = [j for j in jobs if j.key not in done]
+        if len(left) == len(jobs):
+            plan.append((sweep, [*sweep.overrides, *extra], len(jobs)))
+        elif left:
+            plan += [(sweep, list(overrides), n) for _, overrides, n in job_groups(left)]
+    return plan
+
+
+def run_sweeps(
+    page: Page,
+    out: Path,
+    manifest: dict[str, Any],
+    extra: Sequence[str],
+    hydra: Sequence[str],
+    scripts_dir: Path,
+    python: str = sys.executable,
+) -> list[Mapping[str, Any]]:
+    """Launch every sweep of ``page`` that has jobs left, one after another, into ``out/sweeps``; record
+    each launch (command, wall time, exit code) in ``out/reproduce.json``; return this call's launches.
+    A sweep whose multirun fails (a job failed) does not stop the others."""
+    out = Path(out)
+    plan = planned_launches(page, out, extra)
+    if not plan:
+        log.info("page %s: every job has finished in %s", page.name, out / SWEEPS)
+    launches = []
+    for i, (sweep, overrides, jobs) in enumerate(plan, 1):
+        sweep_dir = _free_dir(out / SWEEPS, sweep.name)
+        argv = ["-m", *overrides, *hydra, f"hydra.sweep.dir={sweep_dir}"]
+        (out / LOGS).mkdir(parents=True, exist_ok=True)
+        logfile = out / LOGS / f"{sweep_dir.name}.log"
+        log.info(
+            "sweep %d/%d %s: %d job(s) -> %s (output: %s)", i, len(plan), sweep.name, jobs, sweep_dir, logfile
+        )
+        started, t0 = datetime.now().isoformat(timespec="seconds"), time.perf_counter()
+        with open(logfile, "a") as f:
+            cmd = [python, str(Path(scripts_dir) / sweep.script), *argv]
+            code = subprocess.run(
+                cmd, stdout=f, stderr=subprocess.STDOUT, cwd=Path(scripts_dir).parent
+            ).returncode
+        wall = time.perf_counter() - t0
+        launch = {"sweep": sweep.name, "dir": str(sweep_dir), "command": display(sweep.script, argv),
+                  "jobs": jobs, "started": started, "wall_s": round(wall, 1), "returncode": code}  # fmt: skip
+        manifest["launches"].append(launch)
+        atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+        launches.append(launch)
+        if code == 0:
+            log.info("sweep %d/%d %s: done in %.0f s", i, len(plan), sweep.name, wall)
+        else:
+            log.warning("sweep %d/%d %s: exit code %d after %.0f s (a job failed?): see %s", i, len(plan),
+                        sweep.name, code, wall, logfile)  # fmt: skip
+    return launches

@@ -1,0 +1,413 @@
+"""``scripts/reproduce.py``: every published page from one command (:mod:`evcd.report.reproduce`).
+
+A tiny page of four rule jobs on the 8 x 8 grid (two sweeps) runs end to end once per test run
+(:func:`shared_folder`): its multiruns, the rendering (make_table, a dispatcher per seed, paired rows)
+and the comparison; then ``--check`` on its run directories is equal to the data committed from it,
+and names the cell edited in that data; a reproduction with a job deleted resumes just that job.
+The refusals run in one process (:func:`run_refusals`). Every shipped page's jobs compose against
+``conf/`` (no SUMO), and the rows and sections its comparisons read are on its committed pages.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from evcd.experiments.schema import register_configs
+from evcd.report.reproduce.check import (
+    csv_differences,
+    markdown_differences,
+    region_differences,
+    section_lines,
+)
+from evcd.report.reproduce.check import tables as md_tables
+from evcd.report.reproduce.found import job_groups
+from evcd.report.reproduce.launch import check_launcher
+from evcd.report.reproduce.spec import PageError, PageJob, known_pages, load_page
+from evcd.report.sweep import world_label
+from tests.conftest import CONF, ROOT, SCRIPTS, run_refusals, run_script, shared_folder
+
+PAGES = ROOT / "docs" / "reproduce"
+#: The shipped pages and their jobs (what --dry-run counts).
+SHIPPED_JOBS = {"results": 90, "fleet": 90, "readme": 20, "perturbed": 25}
+
+
+def tiny_page(overrides: list[str]) -> dict[str, Any]:
+    """A page of two sweeps of rule jobs (greedy seeds 0-1, queue_aware seeds 0-1), rendered three ways."""
+    small = [*overrides, "seed=0,1", "eval.episodes=2", "eval.bootstrap_resamples=200"]
+    sweep = {"script": "train.py", "task": "single", "regime": "peak"}
+    page_md = "committed/page.md"
+    return {
+        "title": "a tiny page",
+        "sweeps": [
+            {"name": "greedy", **sweep, "overrides": [*small, "agent=greedy"]},
+            {"name": "queue", **sweep, "overrides": [*small, "agent=queue_aware", "eval.baselines=[greedy]"]},
+        ],
+        "renders": [
+            {"name": "table", "kind": "table", "sweeps": ["greedy", "queue"], "options": {"resamples": 200},
+             "compare": [{"kind": "csv", "file": "results.csv", "committed": "committed/results.csv"},
+                         {"kind": "markdown", "file": "results.md", "committed": page_md,
+                          "section": "## Regime `peak`"}]},
+            {"name": "seeds", "kind": "seed_rows", "sweeps": ["greedy"], "options": {"order": ["greedy"]},
+             "compare": [{"kind": "markdown", "file": "seeds.md", "committed": page_md}]},
+            {"name": "pairs", "kind": "paired_rows", "sweeps": ["greedy", "queue"],
+             "options": {"header": ["what", "difference"], "rows": [
+                 {"cells": ["queue_aware - greedy"], "a": "peak/queue_aware", "b": "peak/greedy"},
+                 {"cells": ["by seed"], "a": "peak/queue_aware", "b": "peak/greedy", "by": "seed"}]},
+             "compare": [{"kind": "markdown", "file": "pairs.md", "committed": page_md}]},
+        ],
+    }  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def reproduced(script_overrides, tmp_path_factory) -> Path:
+    """The tiny page reproduced once per test run (``out/``), and its rendering committed (``root/``)."""
+
+    def build(folder: Path) -> None:
+        (folder / "page.yaml").write_text(yaml.safe_dump(tiny_page(script_overrides)))
+        (folder / "root").mkdir()
+        proc = run_script(
+            "reproduce.py", folder / "page.yaml", "--out", folder / "out", "--root", folder / "root"
+        )
+        log = proc.stdout + proc.stderr
+        assert proc.returncode == 1, log[-3000:]  # rendered; nothing committed yet to compare with
+        assert "committed/results.csv: no such committed file" in log
+        rendered, committed = folder / "out" / "rendered", folder / "root" / "committed"
+        committed.mkdir()
+        shutil.copy(rendered / "table" / "results.csv", committed / "results.csv")
+        text = "".join((rendered / r / f).read_text() for r, f in
+                       (("table", "results.md"), ("seeds", "seeds.md"), ("pairs", "pairs.md")))  # fmt: skip
+        (committed / "page.md").write_text(text)
+
+    return shared_folder(tmp_path_factory, "reproduce_tiny_page", build)
+
+
+# ---------------------------------------------------------------------------------------- end to end
+@pytest.mark.slow
+def test_a_page_runs_renders_and_checks_equal_then_names_an_edited_cell(reproduced, tmp_path):
+    out = reproduced / "out"
+    manifest = json.loads((out / "reproduce.json").read_text())
+    assert [(x["sweep"], x["jobs"], x["returncode"]) for x in manifest["launches"]] == [
+        ("greedy", 2, 0),
+        ("queue", 2, 0),
+    ]
+    assert all(x["wall_s"] > 0 and "python scripts/train.py -m" in x["command"] for x in manifest["launches"])
+    summary = (out / "rendered" / "reproduce.md").read_text()
+    assert "- Environment: `evcd/ChargingNav-v1`" in summary and "## Jobs" in summary
+    assert (
+        summary.count("| greedy | seed=") == 2 and summary.count("| queue | seed=") == 2
+    )  # each job's wall time
+    assert "| queue_aware - greedy | " in (out / "rendered" / "pairs" / "pairs.md").read_text()
+
+    page, root = reproduced / "page.yaml", reproduced / "root"
+    same = run_script(
+        "reproduce.py", page, "--check", out / "sweeps", "--out", tmp_path / "a", "--root", root
+    )
+    assert same.returncode == 0, (same.stdout + same.stderr)[-3000:]
+    assert "equal to the committed data" in same.stderr
+
+    edited = tmp_path / "root"
+    shutil.copytree(root, edited)
+    csv_file = edited / "committed" / "results.csv"
+    lines = csv_file.read_text().splitlines()
+    header = lines[0].split(",")
+    row = next(i for i, line in enumerate(lines) if line.startswith("peak,greedy,30,1,"))
+    cells = lines[row].split(",")
+    old = cells[header.index("mean_travel_time")]
+    cells[header.index("mean_travel_time")] = "999.5"
+    lines[row] = ",".join(cells)
+    csv_file.write_text("\n".join(lines) + "\n")
+    md = edited / "committed" / "page.md"
+    pair = next(line for line in md.read_text().splitlines() if line.startswith("| queue_aware - greedy |"))
+    md.write_text(md.read_text().replace(pair, "| queue_aware - greedy | EDITED |"))
+    proc = run_script(
+        "reproduce.py", page, "--check", out / "sweeps", "--out", tmp_path / "b", "--root", edited
+    )
+    assert proc.returncode == 1, (proc.stdout + proc.stderr)[-3000:]
+    assert proc.stdout.splitlines() == [
+        f"committed/results.csv: row regime=peak agent=greedy evs=30 seed=1: column 'mean_travel_time': "
+        f"'999.5' -> '{old}'",
+        next(
+            line
+            for line in proc.stdout.splitlines()
+            if "column 'difference' of row 'queue_aware - greedy'" in line
+        ),
+    ]
+    assert f"'EDITED' -> '{pair.split('|')[2].strip()}'" in proc.stdout
+
+
+@pytest.mark.slow
+def test_a_reproduction_resumes_only_the_jobs_left(reproduced, tmp_path):
+    out = tmp_path / "out"
+    shutil.copytree(reproduced / "out", out, symlinks=True)
+    shutil.rmtree(out / "rendered")
+    kept = out / "sweeps" / "greedy" / "0_greedy_evs30_seed0" / "results.json"
+    before = kept.read_bytes()
+    shutil.rmtree(out / "sweeps" / "greedy" / "1_greedy_evs30_seed1")
+    proc = run_script("reproduce.py", reproduced / "page.yaml", "--out", out, "--root", reproduced / "root")
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[
+        -3000:
+    ]  # the same numbers: same seed, same result
+    launches = json.loads((out / "reproduce.json").read_text())["launches"]
+    assert [(x["sweep"], x["jobs"], Path(x["dir"]).name) for x in launches[2:]] == [
+        ("greedy", 1, "greedy-resume1")
+    ]
+    assert "seed=1" in launches[2]["command"] and "seed=0,1" not in launches[2]["command"]
+    assert kept.read_bytes() == before and (out / "sweeps" / "greedy-resume1" / "multirun.yaml").is_file()
+    assert "sweep 1/1 greedy: 1 job(s)" in proc.stderr
+
+
+@pytest.mark.slow
+def test_bad_input_is_refused_in_one_line_and_nothing_is_written(reproduced, tmp_path):
+    page, root, sweeps = reproduced / "page.yaml", reproduced / "root", reproduced / "out" / "sweeps"
+    job = sweeps / "greedy" / "0_greedy_evs30_seed0"
+
+    def edited_job(name: str, edit) -> Path:
+        copy = tmp_path / name / job.name
+        shutil.copytree(job, copy)
+        data = json.loads((copy / "results.json").read_text())
+        edit(data)
+        (copy / "results.json").write_text(json.dumps(data))
+        return copy.parent
+
+    fleet = edited_job("fleet_run", lambda d: d.update(task="fleet"))
+    table = edited_job("table_run", lambda d: d["config"].update(regime="table"))
+    incomplete = tmp_path / "incomplete"
+    shutil.copytree(sweeps, incomplete)
+    shutil.rmtree(incomplete / "greedy" / "1_greedy_evs30_seed1")
+    taken = tmp_path / "taken"
+    taken.mkdir()
+    (taken / "notes.txt").write_text("mine")
+    (tmp_path / "empty").mkdir()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({**tiny_page([]), "colour": "red"}))
+    out = tmp_path / "outs"
+    check = ["--root", root, "--check"]
+    cases = {
+        "no page 'nope': the pages are fleet, perturbed, readme, results": ["nope", "--out", out / "a"],
+        "is a fleet run (task=fleet); the jobs of page page here are single-target (task=single)":
+            [page, *check, fleet, "--out", out / "b"],
+        "is a run of regime 'table' (experiment=table); the jobs of page page here are of regime 'peak'":
+            [page, *check, table, "--out", out / "c"],
+        "page page: 1 of 4 jobs did not finish": [page, *check, incomplete, "--out", out / "d"],
+        "exists and is not a reproduction's folder": [page, "--out", taken],
+        "unknown key(s) colour": [bad, "--out", out / "f"],
+        "holds no run directory": [page, *check, tmp_path / "empty", "--out", out / "g"],
+    }  # fmt: skip
+    if importlib.util.find_spec("hydra_plugins.hydra_ray_launcher") is None:  # else it would run
+        ray = 'plugin hydra_plugins.hydra_ray_launcher, which is not installed: pip install -e ".[ray]"'
+        cases[ray] = [page, "hydra/launcher=evcd_ray", "--out", out / "h"]
+    results = run_refusals("reproduce.py", list(cases.values()), tmp_path / "refusals")
+    for (message, _), (code, log) in zip(cases.items(), results, strict=True):
+        assert code == 2, (message, log[-2000:])
+        errors = [line for line in log.splitlines() if " ERROR " in line]
+        assert len(errors) == 1 and message in errors[0], (message, log[-2000:])
+    missing = results[3][1]
+    assert (
+        "  missing: greedy: " in missing and "seed=1" in missing.split("missing: greedy:")[1].splitlines()[0]
+    )
+    assert "complete them with:" in missing and f"hydra.sweep.dir={out / 'd'}-completion/greedy-0" in missing
+    assert (
+        f"then: python scripts/reproduce.py {page} --check {incomplete} {out / 'd'}-completion --root {root}"
+        in missing
+    )
+    assert not out.exists() and [p.name for p in taken.iterdir()] == ["notes.txt"]
+
+
+# ---------------------------------------------------------------------------------------- no SUMO
+def test_a_missing_launcher_plugin_names_the_extra_that_installs_it():
+    absent = lambda module: False  # noqa: E731
+    with pytest.raises(PageError, match=r'hydra/launcher=evcd_slurm needs .*: pip install -e "\.\[slurm\]"'):
+        check_launcher(["hydra/launcher=evcd_slurm", "hydra.launcher.partition=cpu"], absent)
+    with pytest.raises(PageError, match=r'pip install -e "\.\[ray\]"'):
+        check_launcher(["hydra/launcher=evcd_ray"], absent)
+    with pytest.raises(PageError, match=r"installed: pip install -e \.$"):
+        check_launcher(["hydra/launcher=joblib"], absent)
+    check_launcher(["hydra/launcher=evcd_slurm"], lambda module: True)
+    check_launcher(["hydra.launcher.n_jobs=2", "hydra/launcher=basic"], absent)  # no plugin needed
+
+
+def _main():
+    spec = importlib.util.spec_from_file_location("reproduce_script", SCRIPTS / "reproduce.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main
+
+
+@pytest.mark.parametrize("page", sorted(SHIPPED_JOBS))
+def test_a_dry_run_lists_the_jobs_and_their_commands_and_runs_nothing(page, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert (
+        _main()([page, "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "--dry-run", "--out", str(out)])
+        == 0
+    )
+    text = capsys.readouterr().out
+    definition = load_page(page, PAGES)
+    assert f"{SHIPPED_JOBS[page]} jobs to run in {len(definition.sweeps)} multirun(s)" in text
+    commands = [line.strip() for line in text.splitlines() if line.startswith("  python ")]
+    for sweep, command in zip(definition.sweeps, commands, strict=True):
+        assert command.startswith(f"python scripts/{sweep.script} -m ")
+        assert command.endswith(
+            f"hydra/launcher=joblib hydra.launcher.n_jobs=2 hydra.sweep.dir={out}/sweeps/{sweep.name}"
+        )
+    assert sum(1 for line in text.splitlines() if line.startswith("    ")) == SHIPPED_JOBS[page]
+    assert not out.exists()
+
+
+def test_the_shipped_pages_rows_and_sections_are_on_their_committed_pages():
+    assert known_pages(PAGES) == sorted(SHIPPED_JOBS)
+    for name in known_pages(PAGES):
+        page = load_page(name, PAGES)
+        assert len(page.jobs()) == SHIPPED_JOBS[name]
+        for render in page.renders:
+            for entry in render.compare:
+                text = (ROOT / entry.committed).read_text()
+                section = md_tables(section_lines(text, entry.section))
+                if render.kind == "paired_rows":  # every row's label cells are a row of the page's table
+                    header = [str(h) for h in render.options["header"]]
+                    rows = [cells for _, h, rs in section if h == header for _, cells in rs]
+                    for row in render.options["rows"]:
+                        assert any(cells[: len(row["cells"])] == row["cells"] for cells in rows), (name, row)
+                if render.kind == "seed_rows":
+                    header = [h for _, h, _ in section if h[0] == "dispatcher"]
+                    assert header and header[0][1:6] == [f"seed {s}" for s in range(5)], name
+                    rows = [cells[0] for _, h, rs in section if h[0] == "dispatcher" for _, cells in rs]
+                    assert list(render.options["order"]) == rows, name
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", sorted(SHIPPED_JOBS))
+def test_every_job_of_a_shipped_page_composes(page):
+    """Every value of every swept axis, with the sweep's other overrides, composed by Hydra against
+    ``conf/`` (each job's overrides are a product of these values: a typo fails here); the jobs record
+    the task and regime the page says, and the rows its renders read are rows the jobs make."""
+    definition = load_page(page, PAGES)
+    register_configs(CONF)
+    rows = set()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        for sweep in definition.sweeps:
+            jobs = sweep.jobs()
+            axes = [sorted({job[i] for job in jobs}) for i in range(len(jobs[0]))]
+            for k in range(max(map(len, axes))):  # lockstep over the axes: every value at least once
+                overrides = [values[k % len(values)] for values in axes]
+                cfg = compose(Path(sweep.script).stem, overrides=overrides)
+                assert (cfg.task, cfg.regime) == (sweep.task, sweep.regime), (sweep.name, overrides)
+                world = world_label(OmegaConf.to_container(cfg, resolve=True))
+                agent = f"sb3_{cfg.sb3.algo}" if sweep.script == "train_sb3.py" else str(cfg.agent.name)
+                rows |= {(world, a) for a in [agent, *cfg.eval.baselines]}
+    for render in definition.renders:
+        for row in render.options.get("rows", ()):
+            for side in ("a", "b"):
+                assert tuple(row[side].rsplit("/", 1)) in rows, (row[side], sorted(rows))
+        assert set(render.options.get("order", ())) <= {a for _, a in rows}
+
+
+def test_a_page_definition_is_checked_with_the_allowed_values_named(tmp_path):
+    def refused(data: dict[str, Any]) -> str:
+        path = tmp_path / "p.yaml"
+        path.write_text(yaml.safe_dump(data))
+        with pytest.raises(PageError) as info:
+            load_page(str(path), PAGES)
+        return str(info.value)
+
+    page = tiny_page(["evs=30"])
+    sweep = page["sweeps"][0]
+    assert "script='run.py': choose among train.py, evaluate.py, train_sb3.py" in refused(
+        {**page, "sweeps": [{**sweep, "script": "run.py"}, page["sweeps"][1]]})  # fmt: skip
+    assert "kind='pie': choose among table, fleet_table, seed_rows, paired_rows" in refused(
+        {**page, "renders": [{**page["renders"][0], "kind": "pie"}]})  # fmt: skip
+    assert "sweeps ['nope']: the page's sweeps are greedy, queue" in refused(
+        {**page, "renders": [{**page["renders"][0], "sweeps": ["nope"]}]})  # fmt: skip
+    assert "two sweeps share a job" in refused(
+        {**page, "sweeps": [sweep, {**sweep, "name": "again"}], "renders": []}
+    )
+    with pytest.raises(
+        PageError, match=r"no page 'results\.yml': the pages are fleet, perturbed, readme, results"
+    ):
+        load_page("results.yml", PAGES)
+
+
+def test_missing_jobs_are_grouped_into_the_fewest_multiruns():
+    page = load_page("results", PAGES)
+    jobs = page.jobs()
+    left = [
+        j for j in jobs if "evs=400" in j.overrides and ("seed=3" in j.overrides or "seed=4" in j.overrides)
+    ]
+    ((sweep, overrides, n),) = job_groups(left)
+    assert n == 12 and "seed=3,4" in overrides and "evs=400" in overrides
+    assert "agent=dueling_ddqn,dqn,hindsight,queue_aware,greedy,random" in overrides
+    odd = [jobs[0], jobs[-1]]
+    assert [g[1] for g in job_groups(odd)] == [j.overrides for j in odd]
+    assert isinstance(jobs[0], PageJob) and sweep.name == "table"
+
+
+# ---------------------------------------------------------------------------------------- comparisons
+def test_csv_rows_are_compared_by_job_key_and_column(tmp_path):
+    committed, rendered = tmp_path / "old.csv", tmp_path / "new.csv"
+    committed.write_text("agent,seed,mean,wall,old_only\ngreedy,0,1.0,5,x\ngreedy,1,nan,5,x\ndqn,0,2.0,5,x\n")
+    rendered.write_text("agent,seed,mean,wall,new_only\ngreedy,1,nan,7,y\ngreedy,0,1,9,y\nrandom,0,3.0,1,y\n")
+    found, notes = csv_differences(rendered, committed, ("agent", "seed"), ("wall",), "old.csv")
+    assert found == ["old.csv: row agent=dqn seed=0: in the committed file, not rendered",
+                     "old.csv: row agent=random seed=0: rendered, not in the committed file"]  # fmt: skip
+    assert notes == ["old.csv: column 'new_only' only in the rendering: not compared",
+                     "old.csv: column 'old_only' only in the committed file: not compared"]  # fmt: skip
+    rendered.write_text("agent,seed,mean\ngreedy,0,1.5\ngreedy,1,nan\ndqn,0,2.0\n")
+    found, _ = csv_differences(rendered, committed, ("agent", "seed"), (), "old.csv")
+    assert found == ["old.csv: row agent=greedy seed=0: column 'mean': '1.0' -> '1.5'"]
+
+
+PAGE = """# A page
+
+```bash
+# a comment in code, not a heading
+```
+
+## Section
+
+| agent | EVs | mean | wall |
+|---|---:|---:|---:|
+| greedy | 200 | **1.0** | 5 |
+| greedy | 300 | 2.0 | 5 |
+| other | 200 | 9.0 | 5 |
+
+## Next
+
+| agent | EVs | mean | wall |
+|---|---:|---:|---:|
+| greedy | 200 | 7.0 | 5 |
+"""
+
+
+def test_markdown_tables_are_compared_by_header_row_and_column():
+    rendered = "\n".join(["| agent | EVs | mean | wall |", "|---|---|---|---|", "| greedy | 200 | 1.0 | 6 |",
+                          "| greedy | 300 | 2.5 | 6 |"])  # fmt: skip
+    found, notes = markdown_differences(rendered, PAGE, "p.md", "## Section", ("wall",))
+    assert found == ["p.md:12: column 'mean' of row 'greedy | 300': '2.0' -> '2.5'"]  # bold and wall ignored
+    assert notes == ["p.md:9: 1 row(s) of table 'agent | EVs | mean | wall' not made by this page's jobs"]
+    found, _ = markdown_differences(
+        rendered.replace("| 300 |", "| 400 |"), PAGE, "p.md", "## Section", ("wall",)
+    )
+    assert found == ["p.md:9: row 'greedy | 400' of table 'agent | EVs | mean | wall': not on the page"]
+    found, _ = markdown_differences(rendered, PAGE, "p.md", "## Next", ("wall",))
+    assert found[0] == "p.md:19: column 'mean' of row 'greedy | 200': '7.0' -> '1.0'"
+    assert markdown_differences(rendered, PAGE, "p.md", "## Absent")[0] == ["p.md: no heading '## Absent'"]
+    assert section_lines(PAGE, "## Section")[0][0] == 8  # the code's "#" is not a heading
+
+
+def test_a_pages_generated_regions_are_rendered_from_the_new_data(tmp_path):
+    assert region_differences("README.md", ROOT, {"docs/results.csv": ROOT / "docs" / "results.csv"}) == []
+    new = tmp_path / "results.csv"
+    row = "table,random,200,0,50,50,0,"
+    new.write_text((ROOT / "docs" / "results.csv").read_text().replace(f"{row}480.1,", f"{row}481.1,", 1))
+    (found,) = region_differences("README.md", ROOT, {"docs/results.csv": new})
+    assert (
+        "README.md:" in found and "column 'random' of row '200': '536.8 [471.4, 602.2]' -> '537.0 [" in found
+    )
