@@ -6,6 +6,7 @@
     python scripts/evaluate.py agent=dueling_ddqn agent.checkpoint=outputs/train/<run>   # a trained policy
     python scripts/evaluate.py task=fleet agent=central evs=400 fleet.guided_share=0.5 episodes=5  # fleet
     python scripts/evaluate.py task=fleet agent=dqn agent.checkpoint=outputs/train/<fleet run> episodes=5
+    python scripts/evaluate.py task=fleet agent=fleet_bound evs=600 episodes=5   # the clairvoyant bound
 
 Writes ``episodes.csv`` (one row per episode) and ``results.json`` (summary, rows, config) into the
 Hydra run directory and logs the summary: mean, median and 95% bootstrap interval of the mean
@@ -29,7 +30,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from evcd.agents import agent_class, agent_defaults, make_agent_for_env
+from evcd.agents import agent_class, agent_defaults
 from evcd.agents.saved_policy import saved_run
 from evcd.cli.errors import refuse_removed_settings, stop_on_bad_setting
 from evcd.cli.params import agent_params
@@ -42,11 +43,12 @@ from evcd.env.runners.fleet import FleetRunner
 from evcd.experiments.schema import register_configs
 from evcd.experiments.worlds import env_kwargs, fleet_kwargs
 from evcd.loops.evaluate import evaluate
-from evcd.loops.fleet import fleet_dispatcher_learns
+from evcd.loops.fleet_bound import fleet_learns, make_fleet_dispatcher
 from evcd.loops.hindsight import dispatcher_learns, make_dispatcher
 from evcd.loops.run_files import FLEET_PNG, RESULTS_JSON, write_episodes_csv, write_results_json
 from evcd.loops.seeds import agent_rng
 from evcd.loops.tasks import TASKS
+from evcd.planner import MissingSolverError
 from evcd.report.scenario import format_table
 from evcd.utils.checkpoint import CheckpointError
 from evcd.utils.validation import check_int
@@ -162,10 +164,10 @@ def _fleet_dispatcher(cfg: DictConfig, seed: int) -> tuple[str, Any, FleetRunner
     runner and the trained policy's run config; no SUMO yet."""
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = str(params.pop("name"))
-    params, policy, trained_config = trained_policy(name, params, fleet_dispatcher_learns(name))
+    params, policy, trained_config = trained_policy(name, params, fleet_learns(name))
     env = FleetEnv(**fleet_kwargs(cfg))  # validates every value; loads the scenario, no SUMO
     env.check_days()  # every day has EVs to guide (its routes, no SUMO)
-    agent = make_agent_for_env(name, env, agent_rng(seed), **params)
+    agent = make_fleet_dispatcher(name, env, agent_rng(seed), **params)  # or the clairvoyant bound
     if policy is not None:
         agent.load_state_dict(policy, policy_only=True)
     return name, agent, FleetRunner(env), trained_config
@@ -186,7 +188,7 @@ def main(cfg: DictConfig) -> float:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     try:
         return run(cfg, out_dir)["mean_travel_time"]
-    except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
+    except (ValueError, FileNotFoundError, FileExistsError, CheckpointError, MissingSolverError) as exc:
         stop_on_bad_setting(exc, log, out_dir, cfg)
 
 

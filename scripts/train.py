@@ -9,6 +9,7 @@
         seed=0,1,2,3,4 evs=200,300,400                                          # the results table (joblib)
     python scripts/train.py resume=true hydra.run.dir=outputs/train/<run>       # continue a run
     python scripts/train.py experiment=fleet agent=dueling_ddqn                 # the fleet (docs/FLEET.md)
+    python scripts/train.py experiment=fleet agent=fleet_bound                  # its clairvoyant bound
     tensorboard --logdir outputs/
 
 Everything is in ``conf/train.yaml`` (and ``conf/experiment/``); see :mod:`evcd.loops.train` for what a
@@ -39,11 +40,13 @@ from evcd.env.runners import FleetRunner, check_engine, make_runner
 from evcd.experiments.schema import register_configs
 from evcd.experiments.worlds import check_forecaster, split_days, split_kwargs
 from evcd.loops.fleet import fleet_dispatcher_learns
+from evcd.loops.fleet_bound import fleet_learns, make_fleet_dispatcher
 from evcd.loops.hindsight import check_rule, dispatcher_learns, make_dispatcher
 from evcd.loops.seeds import agent_rng, baseline_rng
 from evcd.loops.tasks import TASKS
 from evcd.loops.train import TrainSettings, train_and_evaluate
 from evcd.loops.validation import ValidationSettings
+from evcd.planner import MissingSolverError
 from evcd.utils.checkpoint import CheckpointError
 from evcd.utils.validation import check_int
 
@@ -167,11 +170,11 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
     check_int("torch_threads", cfg.torch_threads, minimum=1)
     params: dict[str, Any] = OmegaConf.to_container(cfg.agent, resolve=True)
     name = str(params.pop("name"))
-    learns = fleet_dispatcher_learns(name)  # unknown or single-only -> ValueError listing the fleet's
+    learns = fleet_learns(name)  # unknown or single-only -> ValueError listing the fleet's
     if params.pop("checkpoint", None) is not None:
         raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
                          "resume=true with its hydra.run.dir")  # fmt: skip
-    if agent_class(name).learner_block:
+    if learns and agent_class(name).learner_block:
         params["config"] = learner_config(cfg.learner)
     # refuses the single target's options; validates every value (guided_share in (0, 1]); no SUMO yet
     envs = {split: FleetEnv(**split_kwargs(cfg, split, seed)) for split in ("train", "eval")}
@@ -182,7 +185,8 @@ def build_fleet(cfg: DictConfig) -> dict[str, Any]:
                  for r in cfg.train.validation.rules}  # fmt: skip
     for env in envs.values():
         env.check_days()  # every day has EVs to guide (its route file; no SUMO)
-    agent = make_agent_for_env(name, envs["train"], agent_rng(seed), **params)
+    # the agent, or the clairvoyant bound (agent=fleet_bound: planned, then played, per episode)
+    agent = make_fleet_dispatcher(name, envs["train"], agent_rng(seed), **params)
     baselines = {str(r): _fleet_rule(r, envs["eval"], seed, "eval.baselines") for r in cfg.eval.baselines}
     return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules,
             "runner": lambda phase: FleetRunner(envs[phase])}  # fmt: skip
@@ -293,7 +297,7 @@ def main(cfg: DictConfig) -> float:
     (:func:`~evcd.cli.errors.stop_on_bad_setting`)."""
     try:
         return train(cfg)
-    except (ValueError, FileNotFoundError, FileExistsError, CheckpointError) as exc:
+    except (ValueError, FileNotFoundError, FileExistsError, CheckpointError, MissingSolverError) as exc:
         stop_on_bad_setting(exc, log, Path(HydraConfig.get().runtime.output_dir), cfg)
 
 

@@ -1,7 +1,8 @@
 """The house: each folder of ``evcd/`` is one layer and imports run one way, from the top down
 (shared/DESIGN.md section 5):
 
-    utils < scenario < sim < env < agents < loops < report, bench, experiments < cli (< scripts)
+    utils < scenario < sim < forecast, planner < env < agents < loops < report, bench, experiments
+          < cli (< scripts)
 
 A module imports ``evcd`` modules of its own layer or of layers below it, never above it nor a
 sibling (``report``, ``bench`` and ``experiments`` do not import each other), and no module reaches
@@ -25,14 +26,15 @@ PACKAGE = Path(__file__).resolve().parents[1] / "evcd"
 
 #: Each folder's rank: a module may import evcd modules of a lower rank or of its own folder.
 RANKS = {
-    "utils": 0, "scenario": 1, "sim": 2, "forecast": 3, "env": 4, "agents": 5, "loops": 6, "report": 7,
-    "bench": 7, "experiments": 7, "cli": 8,
+    "utils": 0, "scenario": 1, "sim": 2, "forecast": 3, "planner": 3, "env": 4, "agents": 5, "loops": 6,
+    "report": 7, "bench": 7, "experiments": 7, "cli": 8,
 }  # fmt: skip
 #: Third-party modules a layer must not import.
 FORBIDDEN_LIBRARIES = {
     "scenario": ("libsumo", "traci", "torch"),
     "sim": ("torch",),
     "forecast": ("libsumo", "traci", "torch"),
+    "planner": ("libsumo", "traci", "torch"),
     "env": ("torch",),
     "agents": ("libsumo", "traci"),
 }

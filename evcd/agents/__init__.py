@@ -14,7 +14,8 @@ implies: ``dqn`` and ``dueling_ddqn`` are the one :class:`~evcd.agents.dqn.DQNAg
 switches off or on. Other packages add agents with :func:`register_agent` or an entry point in the
 group ``evcd.agents``; the tasks an agent takes are the observation layouts it declares
 (:func:`agent_names`: ``"single"``, ``[D, N, Z]``; ``"fleet"``, ``[D, N, Z, H]``, which only the
-fleet's rules ``reservation`` and ``central`` read alone).
+fleet's rules ``reservation`` and ``central`` read alone, and ``planned``, which plays a plan by vehicle
+id on the fleet, :mod:`evcd.agents.planned`).
 """
 
 from __future__ import annotations

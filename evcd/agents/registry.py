@@ -212,5 +212,6 @@ for _name, _path, _defaults in (
     ("dueling_ddqn", "evcd.agents.dqn:DQNAgent", {"double": True, "dueling": True}),
     ("reservation", "evcd.agents.fleet_rules:ReservationAgent", {}),
     ("central", "evcd.agents.fleet_rules:CentralAgent", {}),
+    ("planned", "evcd.agents.planned:PlannedAgent", {}),
 ):
     register_agent(_name, _path, defaults=_defaults)

@@ -12,6 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from evcd.agents import agent_class
 from evcd.agents.dqn import DQNConfig
+from evcd.loops.fleet_bound import FleetBound
 from evcd.loops.hindsight import HindsightBound, check_dispatcher, dispatcher_learns
 
 
@@ -54,7 +55,7 @@ def check_learner_overrides(name: str, overrides: Sequence[str]) -> None:
         key = str(override).lstrip("+~").split("=", 1)[0]
         if key != "learner" and not key.startswith("learner."):
             continue
-        if name == HindsightBound.name:
+        if name in (HindsightBound.name, FleetBound.name):  # the bounds learn nothing
             return
         learner = agent_class(name)  # an unknown name: ValueError listing the known ones
         if not learner.learns or learner.learner_block:

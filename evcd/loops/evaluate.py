@@ -7,8 +7,9 @@
 Episode ``i`` of run ``seed`` is the same for every dispatcher (:mod:`evcd.loops.seeds`), so two
 dispatchers evaluated with the same seed are compared on the same episodes. Episodes are played by a
 runner (:mod:`evcd.env.runners`); a dispatcher is an agent (played without exploration, and never
-learning: :meth:`~evcd.agents.Agent.observe` is not called) or the hindsight bound
-(:mod:`evcd.loops.hindsight`). Only episodes that end by charging enter the travel-time statistics
+learning: :meth:`~evcd.agents.Agent.observe` is not called), the hindsight bound
+(:mod:`evcd.loops.hindsight`) or, on the fleet, the clairvoyant bound (:mod:`evcd.loops.fleet_bound`).
+Only episodes that end by charging enter the travel-time statistics
 (:mod:`evcd.loops.stats`); truncated ones are counted and listed. The same function evaluates on the
 fleet (a :class:`~evcd.env.runners.fleet.FleetRunner`): its episodes take the days in turn and its
 summary is the fleet's (:mod:`evcd.loops.tasks`).
@@ -24,6 +25,7 @@ import gymnasium
 
 from evcd.agents.base import Agent
 from evcd.env.runners import EpisodeRow, EpisodeRunner, EpisodeSpec, SingleEnvRunner
+from evcd.loops.fleet_bound import FleetBound
 from evcd.loops.hindsight import HindsightBound
 from evcd.loops.progress import EpisodeProgress
 from evcd.loops.seeds import bootstrap_rng, check_seed, episode_spec
@@ -33,8 +35,10 @@ from evcd.utils.validation import check_int
 
 log = logging.getLogger(__name__)
 
-#: What a run evaluates: an agent, or the hindsight bound.
-Dispatcher = Agent | HindsightBound
+#: What a run evaluates: an agent, or a bound (the single target's hindsight, the fleet's clairvoyant).
+Dispatcher = Agent | HindsightBound | FleetBound
+#: The bounds: measurements that play their own runs (:meth:`HindsightBound.play`), not policies.
+BOUNDS = (HindsightBound, FleetBound)
 
 
 def as_runner(env_or_runner: gymnasium.Env | EpisodeRunner) -> EpisodeRunner:
@@ -55,8 +59,9 @@ def play(
     runner: EpisodeRunner, dispatcher: Dispatcher, specs: Sequence[EpisodeSpec], on_episode: Any = None
 ) -> tuple[list[EpisodeRow], dict[str, Any]]:
     """Play ``specs`` without exploration or learning: the rows (in spec order) and the dispatcher's
-    extra results for ``results.json`` (the hindsight bound's per-station times; none for an agent)."""
-    if isinstance(dispatcher, HindsightBound):
+    extra results for ``results.json`` (a bound's report: the hindsight bound's per-station times, the
+    fleet bound's per-episode bound; none for an agent)."""
+    if isinstance(dispatcher, BOUNDS):
         return dispatcher.play(runner, specs, on_episode=on_episode), dispatcher.report()
     return runner.run(specs, dispatcher, explore=False, learn=False, on_episode=on_episode), {}
 
@@ -75,7 +80,7 @@ def evaluate(
     Args:
         env: a :class:`~evcd.env.ChargingNavEnv` (or any env with its ``info`` keys), or a runner
             (:mod:`evcd.env.runners`, a fleet's included). It is not closed here.
-        agent: the dispatcher: an agent, or the hindsight bound.
+        agent: the dispatcher: an agent, or a bound (hindsight; the fleet's clairvoyant bound).
         episodes: number of episodes (>= 1).
         seed: the run seed (>= 0): the episodes and the bootstrap derive from it.
         progress: show a tqdm progress bar (on stderr).
@@ -95,7 +100,7 @@ def evaluate(
         specs = task.specs(seed, episodes, runner)
     elif len(specs) != episodes:
         raise ValueError(f"episodes={episodes} but {len(specs)} specs given")
-    runs = agent.runs_per_episode if isinstance(agent, HindsightBound) else 1
+    runs = agent.runs_per_episode if isinstance(agent, BOUNDS) else 1
     bar = EpisodeProgress(len(specs) * runs, f"evaluate {agent.name}", progress)
     try:
         rows, extra = play(runner, agent, specs, on_episode=bar)

@@ -98,7 +98,7 @@ def test_a_rule_checkpoints_its_generator(name):
 
 
 def test_the_tasks_an_agent_takes_are_the_layouts_it_declares():
-    assert set(agent_names("fleet")) - set(agent_names("single")) == {"reservation", "central"}
+    assert set(agent_names("fleet")) - set(agent_names("single")) == {"reservation", "central", "planned"}
     assert {"ppo", "dqn", "dueling_ddqn", "greedy"} <= set(agent_names("single")) & set(agent_names("fleet"))
     with pytest.raises(ValueError, match="task='bus'"):
         agent_names("bus")

@@ -187,6 +187,41 @@ def test_a_nan_episode_is_left_out_of_its_pairs(tmp_path) -> None:
     assert p.per_seed[0] == pytest.approx(guided("dqn", 1.0, 0, 0) - guided("queue_aware", 1.0, 0, 0))
 
 
+def test_the_room_table_gives_the_bound_and_the_share_of_the_greedy_to_bound_gap(
+    tmp_path, monkeypatch
+) -> None:
+    # greedy 500 s, central 300 s, the played plan 200 s, the bound 100 s (each with SPREAD by seed, so the
+    # gaps are the same on every seed): central closes (500 - 300) / (500 - 100) = 0.5, the plan 0.75
+    for agent, mean in {"greedy": 500.0, "central": 300.0, "fleet_bound": 200.0}.items():
+        for share in SHARES:
+            monkeypatch.setitem(BASE, (agent, share), mean)
+    sweep = write_fleet_sweep(tmp_path / "sweep", agents=("greedy", "central", "fleet_bound"))
+    for job in sweep.glob("*_fleet_bound_*"):
+        data = json.loads((job / "results.json").read_text())
+        data["fleet_bound"] = {
+            "episodes": [
+                {"index": e["episode"], "day": e["day"], "bound": e["guided_travel"] - 100.0}
+                for e in data["episodes"]
+            ]
+        }
+        (job / "results.json").write_text(json.dumps(data))
+    md = make_fleet_table([sweep], tmp_path / "out").markdown
+    room = row(md, "## Room: the clairvoyant bound", ["400", "0.5"])
+    half = T_0975_2 * 5.0 / math.sqrt(3)
+    assert room["bound (s)"] == f"100.0 [{100 - half:.1f}, {100 + half:.1f}] n=3"
+    assert room["central"] == "0.50 [0.50, 0.50] n=3" and room["fleet_bound"] == "0.75 [0.75, 0.75] n=3"
+    assert row(md, "## Mean travel time of the guided EVs", ["400", "1"])["fleet_bound"].startswith("200.0 [")
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "out" / CSV_NAME).read_text())))
+    assert (
+        sorted(float(r["bound"]) for r in rows if r["agent"] == "fleet_bound")
+        == [95.0] * 2 + [100.0] * 2 + [105.0] * 2
+    )
+    assert all(r["bound"] == "nan" for r in rows if r["agent"] != "fleet_bound")
+    # without a bound job there is no room table
+    plain = make_fleet_table([write_fleet_sweep(tmp_path / "plain")], tmp_path / "o2")
+    assert "## Room" not in plain.markdown
+
+
 def test_a_single_target_job_is_not_a_fleet_job_and_the_reverse(tmp_path) -> None:
     """A job of the other task is not a job that did not finish: the table is refused, naming the job
     and the flag (not the incomplete-sweep message and its --allow-incomplete)."""

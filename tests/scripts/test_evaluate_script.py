@@ -18,6 +18,7 @@ from evcd.agents import agent_names, make_agent_for_env
 from evcd.env import ChargingNavEnv
 from evcd.env.fleet import FleetEnv
 from evcd.experiments.worlds import demand_config, env_kwargs, fleet_kwargs
+from evcd.loops.fleet_bound import fleet_dispatcher_names
 from evcd.loops.hindsight import dispatcher_names, make_dispatcher
 from evcd.loops.run_files import CSV_FIELDS
 from evcd.scenario.demand import DemandConfig
@@ -77,8 +78,9 @@ def test_every_agent_config_builds_its_agent(scenario_dir):
 
     env = ChargingNavEnv(**env_kwargs(compose_evaluate(f"scenario.path={scenario_dir}")))  # no SUMO yet
     files = {p.stem for p in (CONF / "agent").glob("*.yaml")}
-    assert files <= set(dispatcher_names()) | set(agent_names("fleet"))  # no file for an unknown agent
-    assert set(dispatcher_names()) | set(agent_names("fleet")) == {*agent_names(), "hindsight"}
+    assert files <= set(dispatcher_names()) | set(fleet_dispatcher_names())  # no file for an unknown agent
+    named = set(dispatcher_names()) | set(fleet_dispatcher_names())
+    assert named == {*agent_names(), "hindsight", "fleet_bound"}
     for name in dispatcher_names():
         params = OmegaConf.to_container(compose_evaluate(f"agent={name}").agent)
         assert params.pop("name") == name

@@ -138,6 +138,22 @@ def test_a_rule_is_evaluated_on_the_fleet_without_training(small, tmp_path):
     assert data["baselines"]["queue_aware"]["paired"]["guided_travel"]["pairs"] == 1
 
 
+def test_the_clairvoyant_bound_is_played_where_a_rule_is(small, tmp_path):
+    """``agent=fleet_bound``: each evaluation episode read, planned and the plan played; results.json
+    holds the played plan as the job's summary and the bound per episode, paired with the baselines."""
+    run = tmp_path / "run"
+    proc = run_script("train.py", *small, "agent=fleet_bound", "agent.time_limit_s=2",
+                      "eval.baselines=[greedy]", f"hydra.run.dir={run}")  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    data = json.loads((run / "results.json").read_text())
+    assert data["agent"] == "fleet_bound" and data["training"]["episodes"] == 0
+    (episode,) = data["fleet_bound"]["episodes"]
+    assert episode["status"] in ("optimal", "feasible") and episode["day"] == 1
+    assert episode["played"] == data["summary"]["guided_travel"] == data["episodes"][0]["guided_travel"]
+    assert episode["bound"] <= episode["model"] and data["fleet_bound"]["settings"]["time_limit_s"] == 2.0
+    assert data["baselines"]["greedy"]["paired"]["guided_travel"]["pairs"] == 1
+
+
 def test_each_seed_plays_its_own_evaluation_days_in_turn(small, tmp_path):
     # day_per_seed on the fleet: seed 1 with 2 episodes takes the block days[2:4] of [1, 4, 7] (wrapping
     # round), one day per episode, so at guided_share 1 its two episodes are two distinct episodes
@@ -160,6 +176,8 @@ BAD_FLEET_TRAINING = [
     (["experiment=peak", "task=fleet"], "task=fleet with experiment regime 'peak'"),
     (["task=single"], "regime 'fleet' is the fleet's: it needs task=fleet"),
     (["agent=hindsight"], "agent 'hindsight' is not an agent of task=fleet"),
+    (["agent=fleet_bound", "agent.time_limit_s=0"], "time_limit_s=0: must be a finite number > 0"),
+    (["agent=fleet_bound", "agent.workers=0"], "workers=0: must be an integer >= 1"),
     (["eval.baselines=[dqn]"], "eval.baselines: 'dqn' is not a rule"),
     (["train.validation.rules=[dueling_ddqn]"], "train.validation.rules: 'dueling_ddqn' is not a rule"),
     (["fleet.guided_share=0"], "guided_share=0"),
