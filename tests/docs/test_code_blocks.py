@@ -489,14 +489,18 @@ def composed(script: Path, args: tuple[str, ...], runs: Path) -> str | None:
 def _parse_args(script: Path, args: list[str]) -> None:
     """An argparse script's ``main`` up to its parsed arguments."""
     module = script_module(script)
-    parse = argparse.ArgumentParser.parse_args
 
-    def parse_then_stop(self: argparse.ArgumentParser, *a: Any, **k: Any) -> None:
-        parse(self, *a, **k)
-        raise Checked
+    def then_stop(parse: Any) -> Any:
+        def parse_then_stop(self: argparse.ArgumentParser, *a: Any, **k: Any) -> None:
+            parse(self, *a, **k)
+            raise Checked
+
+        return parse_then_stop
 
     takes_argv = bool(inspect.signature(module.main).parameters)
-    with _patched(argparse.ArgumentParser, "parse_args", parse_then_stop), \
+    parser = argparse.ArgumentParser
+    with _patched(parser, "parse_args", then_stop(parser.parse_args)), \
+            _patched(parser, "parse_intermixed_args", then_stop(parser.parse_intermixed_args)), \
             _patched(sys, "argv", [str(script), *args]), contextlib.suppress(Checked):  # fmt: skip
         module.main(args) if takes_argv else module.main()
         raise AssertionError(f"{script.name} returned before parsing its arguments")
