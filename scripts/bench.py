@@ -10,6 +10,7 @@
     python scripts/bench.py --suite determinism [train.py overrides ...]   # same seed, same result?
     python scripts/bench.py --suite vector --num-envs 16 --steps 200   # the sweep vector env vs single
     python scripts/bench.py --suite perturbed --episodes 2   # a day built calm vs perturbed (mixed, peak)
+    python scripts/bench.py --suite planner --episodes 3 --time-limits 1 10   # the fleet's bound (.[bound])
 
 ``--suite determinism`` trains the same short run twice (the README job cut to 200 training and 20
 evaluation episodes, on ``--scenario`` with ``--evs``; train.py overrides given after the options
@@ -75,18 +76,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
     p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet", "determinism",
-                                       "vector", "perturbed"),
+                                       "vector", "perturbed", "planner"),
                    default="env",
                    help="env (default): episodes, SUMO, replay; replay: the replay buffer alone; "
                         "throughput: the batched engine's speed; engines: batched vs single; "
                         "fleet: a fleet episode against its day alone; determinism: the same "
                         "training twice in fresh processes, compared; vector: the sweep vector "
                         "environment against the single one, in the README job's world; perturbed: "
-                        "the README job's day built calm and with every kind of perturbation")  # fmt: skip
+                        "the README job's day built calm and with every kind of perturbation; "
+                        "planner: the fleet's clairvoyant bound read and solved on the fleet table's "
+                        "episodes")  # fmt: skip
     p.add_argument("--episodes", type=int, default=200,
                    help="engines suite: episode seeds (default 200); fleet: episodes (~3); "
-                        "perturbed: builds of each day (~2)")  # fmt: skip
-    p.add_argument("--guided-share", type=float, default=1.0, help="fleet suite: guided share (default 1)")
+                        "perturbed: builds of each day (~2); planner: fleet episodes (~3)")  # fmt: skip
+    p.add_argument("--guided-share", type=float, default=1.0,
+                   help="fleet and planner suites: guided share (default 1)")  # fmt: skip
+    p.add_argument("--time-limits", type=float, nargs="+", default=[1.0, 10.0],
+                   help="planner suite: the solver's limits to compare (deterministic s; default 1 10)")
     p.add_argument("--batch-sizes", type=int, nargs="+", default=[25],
                    help="engines suite: batch_episodes values to compare (default 25)")  # fmt: skip
     p.add_argument("--num-envs", type=int, default=16, help="vector suite: sub-environments (default 16)")
@@ -136,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
                  report["fleet_overhead"], report["goals"]["fleet_overhead"],
                  report["fleet_transitions_per_second"], args.out)  # fmt: skip
         return 0
+    if args.suite == "planner":
+        return run_planner(args)
     if args.suite == "perturbed":
         from evcd.bench.perturbed import perturbed_build_cost
 
@@ -292,6 +300,29 @@ def run_determinism(args: argparse.Namespace) -> int:
         return 0
     log.error("NOT identical: %s (runs kept in %s); wrote %s", report["first_difference"], work, args.out)
     return 1
+
+
+def run_planner(args: argparse.Namespace) -> int:
+    """The planner suite on the fleet table's world (``experiment=fleet``, evaluation split of seed 0)."""
+    from evcd.bench.planner import planner_cost
+    from evcd.experiments.worlds import split_kwargs
+    from evcd.planner.solver import MissingSolverError
+
+    cfg = compose_experiment("fleet", [f"fleet.guided_share={args.guided_share}"], conf_dir=CONF)
+    kwargs = {**split_kwargs(cfg, "eval", 0), "cache_dir": args.cache_dir}
+    try:
+        report = planner_cost(kwargs, episodes=args.episodes, time_limits=args.time_limits)
+    except (ValueError, MissingSolverError) as exc:
+        log.error("%s", exc)
+        return 2
+    atomic_write_text(args.out, json.dumps(report, indent=1))
+    for limit, row in report["limits"].items():
+        log.info("limit %s: solve %.1f s median (max %.1f), proven gap %.1f %% median (max %.1f %%), "
+                 "%d of %d optimal; the fleet table's bound column ~%.0f min on %d cores", limit,
+                 row["solve_s_median"], row["solve_s_max"], 100 * row["gap_median"], 100 * row["gap_max"],
+                 row["optimal"], row["episodes"], row["bound_column_minutes"], report["jobs"])  # fmt: skip
+    log.info("reading an episode %.1f s (median); wrote %s", report["read_s_median"], args.out)
+    return 0
 
 
 def run_engine_suite(args: argparse.Namespace, env_kwargs: dict, replay: dict) -> dict:
