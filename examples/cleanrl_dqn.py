@@ -31,17 +31,13 @@ import argparse
 import time
 from pathlib import Path
 
-import gymnasium
 import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812
 from torch.utils.tensorboard import SummaryWriter
 
-import evcd
-from evcd.agents import make_agent_for_env
-from evcd.experiments import make_sweep_env
-from evcd.loops.seeds import episode_spec
+from evcd.experiments import evaluate_policy, make_sweep_env
 
 
 def parse_args() -> argparse.Namespace:
@@ -102,27 +98,15 @@ def linear_schedule(start_e: float, end_e: float, duration: int, t: int) -> floa
 
 
 def evaluate(q: QNetwork, overrides: list[str], episodes: int, seed: int) -> tuple[float, float]:
-    """Mean travel time (s) of the greedy policy and of queue_aware on the same held-out episodes."""
-    env = gymnasium.make(evcd.ENV_ID, experiment="peak", split="eval", overrides=overrides)
-    rule = make_agent_for_env("queue_aware", env.unwrapped, np.random.default_rng(seed))
-    means = []
-    try:
-        for policy in ("dqn", "queue_aware"):
-            times = []
-            for i in range(episodes):
-                obs, info = env.reset(seed=episode_spec(seed, i).reset_seed)
-                rule.begin_episode()
-                terminated = truncated = False
-                while not (terminated or truncated):
-                    with torch.no_grad():
-                        greedy = int(q(torch.from_numpy(obs)).argmax())
-                    action = greedy if policy == "dqn" else rule.act(obs)
-                    obs, _, terminated, truncated, info = env.step(action)
-                times.append(info["travel_time"] if terminated else np.nan)
-            means.append(float(np.nanmean(times)))
-    finally:
-        env.close()
-    return means[0], means[1]
+    """Mean travel time (s) of the greedy policy and of queue_aware on the same held-out episodes
+    (evcd's own evaluation: :func:`evcd.experiments.evaluate_policy`)."""
+
+    @torch.no_grad()
+    def greedy(obs: np.ndarray) -> int:
+        return int(q(torch.from_numpy(obs)).argmax())
+
+    report = evaluate_policy(greedy, "peak", episodes, seed, rules=("queue_aware",), overrides=overrides)
+    return report.summary["policy"].mean_travel_time, report.summary["queue_aware"].mean_travel_time
 
 
 def main() -> None:

@@ -21,10 +21,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.env_checker import check_env
 
 import evcd  # noqa: F401  (registers evcd/ChargingNav-v1)
-from evcd.agents import make_agent_for_env
-from evcd.experiments import make_sweep_env
+from evcd.experiments import evaluate_policy, make_sweep_env
 from evcd.experiments.sb3 import SB3VecEnv
-from evcd.loops.seeds import episode_spec
 
 ENV_ID = "evcd/ChargingNav-v1"
 
@@ -37,28 +35,12 @@ def make(split: str, overrides: list[str]) -> gymnasium.Env:
 def evaluate(model: PPO, overrides: list[str], episodes: int, seed: int) -> tuple[float, float]:
     """Mean travel time (s) of the trained policy and of queue_aware on evaluation episodes
     ``0..episodes-1`` of run ``seed`` (the episodes ``scripts/train.py seed=<seed>`` evaluates on)."""
-    env = make("eval", overrides)
-    rule = make_agent_for_env("queue_aware", env.unwrapped, np.random.default_rng(seed))
-    means = []
-    try:
-        for policy in ("ppo", "queue_aware"):
-            times = []
-            for i in range(episodes):
-                obs, info = env.reset(seed=episode_spec(seed, i).reset_seed)
-                rule.begin_episode()
-                done = False
-                while not done:
-                    if policy == "ppo":
-                        action = int(model.predict(obs, deterministic=True)[0])
-                    else:
-                        action = rule.act(obs)
-                    obs, _, terminated, truncated, info = env.step(action)
-                    done = terminated or truncated
-                times.append(info["travel_time"] if terminated else np.nan)
-            means.append(float(np.nanmean(times)))
-    finally:
-        env.close()
-    return means[0], means[1]
+
+    def act(obs: np.ndarray) -> int:
+        return int(model.predict(obs, deterministic=True)[0])
+
+    report = evaluate_policy(act, "peak", episodes, seed, rules=("queue_aware",), overrides=overrides)
+    return report.summary["policy"].mean_travel_time, report.summary["queue_aware"].mean_travel_time
 
 
 def main() -> None:
