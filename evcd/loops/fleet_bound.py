@@ -32,7 +32,6 @@ runs of each episode, played where the loops would play an agent.
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any, ClassVar
@@ -44,6 +43,7 @@ from evcd.agents.planned import PlannedAgent
 from evcd.env.fleet.plan_inputs import EpisodeInputs, read_episode
 from evcd.env.runners.base import EpisodeSpec
 from evcd.env.runners.fleet import FleetEpisode, FleetRunner
+from evcd.loops.stats import finite_mean
 from evcd.planner.solver import PlanResult, PlanSettings, cp_model, solve
 
 log = logging.getLogger(__name__)
@@ -155,7 +155,7 @@ class FleetBound:
             return {}
         rows = [e.row() for e in self.episodes]
         keys = ("bound", "model", "played", "plain", "played_minus_bound", "played_minus_model", "solve_s")
-        means = {k: _finite_mean([r[k] for r in rows]) for k in keys}
+        means = {k: finite_mean([r[k] for r in rows]) for k in keys}
         statuses = sorted({r["status"] for r in rows})
         return {"fleet_bound": {"episodes": rows, "mean": means, "statuses": statuses,
                                 "settings": asdict(self.settings)}}  # fmt: skip
@@ -202,7 +202,7 @@ def _bound_episode(
     ahead = sum(1 for v, start in result.starts.items()
                 if v in travel and v in depart and travel[v] < start - depart[v] - AHEAD_S)  # fmt: skip
     played = episode.travel_time
-    plain = _finite_mean(list(inputs.plain_travel.values()))
+    plain = finite_mean(list(inputs.plain_travel.values()))
     return BoundEpisode(
         index=index, day=inputs.day, guided=result.guided, planned=len(inputs.requests), status=result.status,
         bound=result.mean_bound, model=result.mean_objective, played=played, plain=plain,
@@ -210,8 +210,3 @@ def _bound_episode(
         ahead=ahead, truncated=int(episode.measures.truncated), solve_s=result.solve_s, read_s=inputs.wall_s,
         play_s=episode.wall_s, message=result.message,
     )  # fmt: skip
-
-
-def _finite_mean(values: Sequence[float]) -> float:
-    finite = [float(v) for v in values if math.isfinite(float(v))]
-    return float(np.mean(finite)) if finite else math.nan
