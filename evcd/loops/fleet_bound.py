@@ -119,6 +119,9 @@ class FleetBound:
         self.episodes: list[BoundEpisode] = []
         self.results: list[PlanResult] = []
 
+    def __repr__(self) -> str:
+        return f"FleetBound({', '.join(f'{k}={v!r}' for k, v in asdict(self.settings).items())})"
+
     def play(
         self,
         runner: FleetRunner,

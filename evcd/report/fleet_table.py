@@ -32,9 +32,10 @@ import numpy as np
 
 from evcd.loops.run_files import ENVIRONMENTS
 from evcd.report.figures import agent_colors, plot_results_bars, plot_validation_curves
+from evcd.report.fleet_room import BOUND_AGENT, room_markdown
 from evcd.report.markdown import format_stat, markdown_table, num
 from evcd.report.paired import PairedStat, paired_cell, paired_stat, per_seed_text
-from evcd.report.seed_stats import MIN_GAP_S, GapShare, SeedStat, gap_share, seed_interval
+from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, job_stamp, stamp_markdown
 from evcd.report.sweep import Collection, ResultsError, WrongTaskError, collect, world_label
 from evcd.report.table import GAP_RULE, validation_gaps, validation_points, validation_rule_means
@@ -46,9 +47,6 @@ MD_NAME = "fleet_results.md"
 CSV_NAME = "fleet_results.csv"
 BARS_PNG = "fleet_results_bars.png"
 VALIDATION_PNG = "fleet_validation_curves.png"
-#: The clairvoyant bound's jobs (``agent=fleet_bound``, :mod:`evcd.loops.fleet_bound`): their travel time is
-#: the played plan's, a column like a dispatcher's; their ``bound`` the proven lower bound of the model.
-BOUND_AGENT = "fleet_bound"
 #: Dispatchers in the order of the table's columns (others follow alphabetically).
 FLEET_AGENT_ORDER = (
     "random", "greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn", BOUND_AGENT,
@@ -65,8 +63,6 @@ FLEET_PAIRS: tuple[tuple[str, str], ...] = (
 )
 #: The columns of the per-dispatcher table, after the cell's.
 DETAIL_COLUMNS = ("dispatcher", "seeds", "truncated", "herding", "queue wait", "with truncated", "training")
-#: The bootstrap of the gap shares draws from this seed (the same table from the same jobs).
-ROOM_SEED = 0
 #: The travel times of the table: the guided EVs' and everybody's charging in the window.
 MEASURES: dict[str, str] = {"guided_travel": "the guided EVs", "all_travel": "all EVs charging in the window"}
 
@@ -103,6 +99,8 @@ class FleetJob:
     bound: float = math.nan
     #: per evaluation fleet episode: (episode, day, guided EVs' mean, all EVs' mean), for the pairs
     per_episode: tuple[tuple[int, int, float, float], ...] = dataclasses.field(default=(), repr=False)
+    #: a ``fleet_bound`` job's proven bound per evaluation fleet episode: (episode, day, bound)
+    per_episode_bound: tuple[tuple[int, int, float], ...] = dataclasses.field(default=(), repr=False)
     #: the periodic held-out validation: (training episodes done, guided EVs' mean) per point
     validation: tuple[tuple[int, float], ...] = dataclasses.field(default=(), repr=False)
     #: the rules' means on the same validation episodes, by rule
@@ -141,6 +139,8 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
         (int(e["episode"]), int(e["day"]), _float(e["guided_travel"]), _float(e["all_travel"]))
         for e in episodes
     )
+    bounds = tuple((int(e["index"]), int(e["day"]), _float(e.get("bound")))
+                   for e in (data.get("fleet_bound") or {}).get("episodes", ()))  # fmt: skip
     return FleetJob(
         regime=world_label(config),  # a perturbed or better-informed world is a table of its own
         agent=str(data["agent"]),
@@ -161,7 +161,8 @@ def fleet_job(data: Mapping[str, Any], job_dir: Path) -> FleetJob:
         **dataclasses.asdict(job_stamp(data)),
         job_dir=job_dir,
         guided_travel_censored=_float(summary.get("guided_travel_censored")),
-        bound=_nanmean([_float(e.get("bound")) for e in (data.get("fleet_bound") or {}).get("episodes", ())]),
+        bound=_nanmean([b for _, _, b in bounds]),
+        per_episode_bound=bounds,
         per_episode=per_episode,
         validation=tuple(
             (int(p["episodes_done"]), _float(p.get("mean"))) for p in validation.get("points", ())
@@ -257,7 +258,7 @@ def fleet_markdown(collection: Collection) -> str:
             *markdown_table([*head, *agents], rows),
             "",
         ]
-    lines += _room_table(jobs, cells, regimes, head, agents)
+    lines += room_markdown(jobs, cells, {c: _cell_label(c, regimes) for c in cells}, head, agents)
     pairs = [(a, b) for a, b in FLEET_PAIRS if a in agents and b in agents]
     if pairs:
         for measure, label in MEASURES.items():
@@ -312,53 +313,6 @@ def fleet_markdown(collection: Collection) -> str:
         "",
     ]
     return "\n".join(lines)
-
-
-def _room_table(
-    jobs: Sequence[FleetJob], cells: Sequence[Cell], regimes: int, head: list[str], agents: Sequence[str]
-) -> list[str]:
-    """Where the room is: per cell the clairvoyant bound (its jobs' proven bound, mean over seeds) and
-    the share of the greedy -> bound gap each dispatcher closes (the played plan's included): from the
-    seed means, with a paired bootstrap interval over seeds (:func:`~evcd.report.seed_stats.gap_share`).
-    Nothing without ``fleet_bound`` and ``greedy`` jobs."""
-    names = {j.agent for j in jobs}
-    if BOUND_AGENT not in names or "greedy" not in names:
-        return []
-    rng = np.random.default_rng(ROOM_SEED)
-    others = [a for a in agents if a != "greedy"]
-
-    def means(c: Cell, agent: str, measure: str = "guided_travel") -> dict[int, float]:
-        return {j.seed: getattr(j, measure) for j in jobs if (j.regime, j.evs, j.guided_share) == c
-                and j.agent == agent}  # fmt: skip
-
-    rows = []
-    for c in cells:
-        bound, greedy = means(c, BOUND_AGENT, "bound"), means(c, "greedy")
-        shares = [gap_share(greedy, means(c, a), bound, rng) for a in others]
-        rows.append([*_cell_label(c, regimes), format_stat(seed_interval(bound.values())),
-                     *(_share_text(s) for s in shares)])  # fmt: skip
-    return [
-        "## Room: the clairvoyant bound and the share of the greedy -> bound gap closed (guided EVs)",
-        "",
-        f"bound: the solver's proven lower bound of the planner's model ({BOUND_AGENT} jobs; s, mean over "
-        "seeds [95% Student-t interval]); its played plan is the column "
-        f"`{BOUND_AGENT}` above. Per dispatcher (G - A) / (G - B) of the seed means, G greedy, B the bound "
-        f"[95% paired bootstrap interval over seeds]; *no room*: G - B below {MIN_GAP_S:g} s or its interval "
-        "includes 0.",
-        "",
-        *markdown_table([*head, "bound (s)", *others], rows),
-        "",
-    ]
-
-
-def _share_text(share: GapShare) -> str:
-    if share.gap.n == 0:
-        return "—"
-    if not share.room:
-        return "no room"
-    if share.gap.n == 1:
-        return f"{share.share:.2f} n=1"
-    return f"{share.share:.2f} [{share.low:.2f}, {share.high:.2f}] n={share.gap.n}"
 
 
 CSV_COLUMNS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(FleetJob) if f.repr)

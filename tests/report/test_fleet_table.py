@@ -187,30 +187,50 @@ def test_a_nan_episode_is_left_out_of_its_pairs(tmp_path) -> None:
     assert p.per_seed[0] == pytest.approx(guided("dqn", 1.0, 0, 0) - guided("queue_aware", 1.0, 0, 0))
 
 
-def test_the_room_table_gives_the_bound_and_the_share_of_the_greedy_to_bound_gap(
-    tmp_path, monkeypatch
-) -> None:
-    # greedy 500 s, central 300 s, the played plan 200 s, the bound 100 s (each with SPREAD by seed, so the
-    # gaps are the same on every seed): central closes (500 - 300) / (500 - 100) = 0.5, the plan 0.75
+def write_bound_sweep(
+    root: Path, monkeypatch, raise_bound: dict[tuple[int, int], float] | None = None
+) -> Path:
+    """greedy 500 s, central 300 s, the played plan 200 s, the bound 100 s (each with SPREAD by seed and
+    OFFSETS by episode, so the gaps are the same on every seed and episode); ``raise_bound``: (seed,
+    episode) -> a bound put in place of that episode's."""
     for agent, mean in {"greedy": 500.0, "central": 300.0, "fleet_bound": 200.0}.items():
         for share in SHARES:
             monkeypatch.setitem(BASE, (agent, share), mean)
-    sweep = write_fleet_sweep(tmp_path / "sweep", agents=("greedy", "central", "fleet_bound"))
+    sweep = write_fleet_sweep(root, agents=("greedy", "central", "fleet_bound"))
     for job in sweep.glob("*_fleet_bound_*"):
         data = json.loads((job / "results.json").read_text())
         data["fleet_bound"] = {
             "episodes": [
-                {"index": e["episode"], "day": e["day"], "bound": e["guided_travel"] - 100.0}
+                {"index": e["episode"], "day": e["day"],
+                 "bound": (raise_bound or {}).get((data["seed"], e["episode"]), e["guided_travel"] - 100.0)}
                 for e in data["episodes"]
             ]
-        }
+        }  # fmt: skip
         (job / "results.json").write_text(json.dumps(data))
+    return sweep
+
+
+def test_the_room_table_gives_the_bound_and_the_share_of_the_greedy_to_bound_gap(
+    tmp_path, monkeypatch
+) -> None:
+    # central closes (500 - 300) / (500 - 100) = 0.5 of the greedy -> bound gap, the played plan 0.75
+    sweep = write_bound_sweep(tmp_path / "sweep", monkeypatch)
     md = make_fleet_table([sweep], tmp_path / "out").markdown
     room = row(md, "## Room: the clairvoyant bound", ["400", "0.5"])
     half = T_0975_2 * 5.0 / math.sqrt(3)
     assert room["bound (s)"] == f"100.0 [{100 - half:.1f}, {100 + half:.1f}] n=3"
     assert room["central"] == "0.50 [0.50, 0.50] n=3" and room["fleet_bound"] == "0.75 [0.75, 0.75] n=3"
     assert row(md, "## Mean travel time of the guided EVs", ["400", "1"])["fleet_bound"].startswith("200.0 [")
+    # the strongest rule (central, not greedy; the bound's played plan is no rule) 100 s above the played
+    # plan and 200 s above the bound on every episode, leaving half of the gap
+    rule = row(md, "## From the strongest rule to the bound", ["400", "1"])
+    assert rule["rule"] == "central" and rule["rule (s)"] == f"300.0 [{300 - half:.1f}, {300 + half:.1f}] n=3"
+    assert rule["rule - played plan"] == "+100.0 [+100.0, +100.0] n=3; 0 / 6 of 6"
+    assert rule["rule - bound"] == "+200.0 [+200.0, +200.0] n=3; 0 / 6 of 6"
+    assert rule["left"] == "0.50"
+    below = row(md, "## Below the bound", ["400", "0.5"])
+    assert below == {"EVs": "400", "guided share": "0.5", "greedy": "0 of 6", "central": "0 of 6",
+                     "fleet_bound (played plan)": "0 of 6"}  # fmt: skip
     rows = list(csv.DictReader(io.StringIO((tmp_path / "out" / CSV_NAME).read_text())))
     assert (
         sorted(float(r["bound"]) for r in rows if r["agent"] == "fleet_bound")
@@ -218,8 +238,22 @@ def test_the_room_table_gives_the_bound_and_the_share_of_the_greedy_to_bound_gap
     )
     assert all(r["bound"] == "nan" for r in rows if r["agent"] != "fleet_bound")
     # without a bound job there is no room table
-    plain = make_fleet_table([write_fleet_sweep(tmp_path / "plain")], tmp_path / "o2")
-    assert "## Room" not in plain.markdown
+    plain = make_fleet_table([write_fleet_sweep(tmp_path / "plain")], tmp_path / "o2").markdown
+    assert "## Room" not in plain and "## Below the bound" not in plain
+
+
+def test_episodes_below_the_bound_are_counted_with_their_margin(tmp_path, monkeypatch) -> None:
+    # seed 0's first episode: central 300 - 5 - 10 = 285 s, greedy 485 s, the played plan 185 s; a bound
+    # of 292 s puts central 7 s and the played plan 107 s below it, greedy above
+    sweep = write_bound_sweep(tmp_path / "sweep", monkeypatch, raise_bound={(0, 0): 292.0})
+    md = make_fleet_table([sweep], tmp_path / "out").markdown
+    for share in ("0.5", "1"):
+        below = row(md, "## Below the bound", ["400", share])
+        assert below["greedy"] == "0 of 6"
+        assert below["central"] == "1 of 6 (up to 7.0 s)"
+        assert below["fleet_bound (played plan)"] == "1 of 6 (up to 107.0 s)"
+    rule = row(md, "## From the strongest rule to the bound", ["400", "1"])
+    assert rule["rule - bound"].endswith("; 1 / 5 of 6")
 
 
 def test_a_single_target_job_is_not_a_fleet_job_and_the_reverse(tmp_path) -> None:
