@@ -14,6 +14,8 @@ objective the guided jobs' summed start, less their departures. With FIFO, each 
 also bounded below by the job's start there were it the only guided job with a choice
 (:func:`~evcd.planner.schedule.lower_starts`: implied by the rest, but it gives the solver's linear
 relaxation the queues the background sessions make), which is what its proven bound starts from.
+The search starts from a plan improved by single-EV moves (:func:`search_start`,
+:mod:`evcd.planner.search`), so its plan is never worse than that one.
 
 Two numbers, both honest: ``objective``, the model's value of the best plan found (the optimum when
 ``status == "optimal"``), and ``bound``, the solver's proven lower bound of the model's optimum (equal
@@ -34,7 +36,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from evcd.planner.model import Job, PlanProblem, PlanStation, horizon
-from evcd.planner.schedule import fifo_starts, greedy_plan, lower_starts, up
+from evcd.planner.schedule import fifo_starts, greedy_plan, lower_starts, plan_value, up
+from evcd.planner.search import improve_plan
 from evcd.utils.validation import check_bool, check_int, check_real
 
 #: How a user gets the solver.
@@ -150,7 +153,8 @@ def solve(
     Args:
         problem: the stations and jobs.
         settings: time limit, workers, FIFO, seed (default :class:`PlanSettings`).
-        hint: a station per guided job to start the search from (default: :func:`greedy_plan`).
+        hint: a station per guided job to start the search from besides the greedy plan (both improved
+            by single-EV moves first: :func:`search_start`).
 
     Raises:
         MissingSolverError: OR-Tools is not installed (the message names the extra).
@@ -182,7 +186,7 @@ def solve(
             _fifo(model, placed.at_station[s])
     model.Minimize(sum(placed.starts[job.name] for job in guided))
     offset = origin * len(guided) - sum(float(job.depart) for job in guided)  # type: ignore[arg-type]
-    placed.hint(problem, greedy_plan(problem) if hint is None else hint)
+    placed.hint(problem, search_start(problem, hint))
     solver = cp.CpSolver()
     solver.parameters.max_deterministic_time = settings.time_limit_s
     solver.parameters.max_time_in_seconds = WALL_CAP * settings.time_limit_s
@@ -202,6 +206,15 @@ def solve(
     if status != "infeasible":
         result["bound"] = float(solver.BestObjectiveBound()) + offset
     return PlanResult(status, message=_message(status, result, settings), **result)
+
+
+def search_start(problem: PlanProblem, hint: Mapping[str, int] | None = None) -> dict[str, int]:
+    """The plan the solver's search starts from: the greedy plan (:func:`greedy_plan`) and ``hint``,
+    each improved by single-EV moves (:func:`~evcd.planner.search.improve_plan`), the better of the
+    two in the model (ties: the greedy one)."""
+    starts = [greedy_plan(problem), *([dict(hint)] if hint is not None else [])]
+    plans = [improve_plan(problem, p) for p in starts]
+    return min(plans, key=lambda p: plan_value(problem, p))
 
 
 class _Placed:
