@@ -32,6 +32,7 @@ runs of each episode, played where the loops would play an agent.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any, ClassVar
@@ -44,6 +45,7 @@ from evcd.env.fleet.plan_inputs import EpisodeInputs, read_episode
 from evcd.env.runners.base import EpisodeSpec
 from evcd.env.runners.fleet import FleetEpisode, FleetRunner
 from evcd.loops.stats import finite_mean
+from evcd.planner.schedule import floor_value
 from evcd.planner.solver import PlanResult, PlanSettings, cp_model, solve
 
 log = logging.getLogger(__name__)
@@ -64,6 +66,9 @@ class BoundEpisode:
         model: the mean travel time of the best plan in the model.
         played: the fleet's ``guided_travel`` with that plan played in SUMO (EVs that charged).
         plain: the guided EVs' mean travel time with every EV on its own station (the reading run).
+        floor: the model's mean were no guided EV delayed by another
+            (:func:`~evcd.planner.schedule.floor_value`): where ``bound`` is no higher, the solver
+            proved nothing about the guided EVs' competition for the points.
         played_minus_bound, played_minus_model: the model's gaps.
         ahead: guided EVs that started charging in SUMO more than :data:`AHEAD_S` before the model
             said (where the model is not exact, it can err towards SUMO).
@@ -81,6 +86,7 @@ class BoundEpisode:
     model: float
     played: float
     plain: float
+    floor: float
     played_minus_bound: float
     played_minus_model: float
     ahead: int
@@ -157,7 +163,16 @@ class FleetBound:
         if not self.episodes:
             return {}
         rows = [e.row() for e in self.episodes]
-        keys = ("bound", "model", "played", "plain", "played_minus_bound", "played_minus_model", "solve_s")
+        keys = (
+            "bound",
+            "model",
+            "played",
+            "plain",
+            "floor",
+            "played_minus_bound",
+            "played_minus_model",
+            "solve_s",
+        )
         means = {k: finite_mean([r[k] for r in rows]) for k in keys}
         statuses = sorted({r["status"] for r in rows})
         return {"fleet_bound": {"episodes": rows, "mean": means, "statuses": statuses,
@@ -209,6 +224,7 @@ def _bound_episode(
     return BoundEpisode(
         index=index, day=inputs.day, guided=result.guided, planned=len(inputs.requests), status=result.status,
         bound=result.mean_bound, model=result.mean_objective, played=played, plain=plain,
+        floor=floor_value(inputs.problem) / result.guided if result.guided else math.nan,
         played_minus_bound=played - result.mean_bound, played_minus_model=played - result.mean_objective,
         ahead=ahead, truncated=int(episode.measures.truncated), solve_s=result.solve_s, read_s=inputs.wall_s,
         play_s=episode.wall_s, message=result.message,

@@ -25,6 +25,7 @@ def finite_mean(values: Sequence[float]) -> float:
     charged = [v for v in values if math.isfinite(v)]
     return float(np.mean(charged)) if charged else math.nan
 
+
 BOOTSTRAP_RESAMPLES = 10_000
 
 

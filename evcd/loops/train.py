@@ -248,6 +248,7 @@ def train_and_evaluate(
             validator = None
             if settings.validation.every:
                 rules = validation_rules or {}
+
                 def specs(played: EpisodeRunner) -> list[EpisodeSpec]:
                     return task.specs(settings.seed, settings.validation.episodes, played, VALIDATION_STREAM)
 

@@ -10,9 +10,10 @@ blocked ones): the schedule SUMO's controller plays for these arrivals and durat
 it is the earliest schedule the model of :mod:`evcd.planner.solver` allows for this assignment (each
 session starts no later than in any other), so its value is that plan's objective in the model.
 
-Three uses: the greedy plan a search starts from, each job's start were it the only guided job with a
+Four uses: the greedy plan a search starts from, each job's start were it the only guided job with a
 choice at a station (:func:`lower_starts`: a lower bound the model adds, since another session can only
-delay it), and a naive reference for the tests.
+delay it), the floor those starts give the whole plan (:func:`floor_value`), and a naive reference for
+the tests.
 """
 
 from __future__ import annotations
@@ -93,6 +94,16 @@ def lower_starts(problem: PlanProblem) -> dict[tuple[str, int], float]:
             starts = fifo_starts(problem, {**fixed, job.name: o.station}, blocked=False)
             out[(job.name, o.station)] = starts[job.name]
     return out
+
+
+def floor_value(problem: PlanProblem) -> float:
+    """The guided jobs' summed travel time were none of them delayed by another job with a choice: each
+    at the station where it would start soonest among the jobs without one (:func:`lower_starts`). No
+    plan of the model with FIFO does better; a solver's proven bound no higher than this proved nothing
+    about the guided EVs' competition for the points."""
+    lower = lower_starts(problem)
+    return sum(min(lower[job.name, o.station] for o in job.options) - float(job.depart)  # type: ignore[arg-type]
+               for job in problem.guided)  # fmt: skip
 
 
 def _option(job: Job, station: int | None) -> Option | None:

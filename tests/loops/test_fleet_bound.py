@@ -72,6 +72,7 @@ def test_the_hand_case_optimum_is_found_and_played_best_of_every_assignment(make
     row = bound.report()["fleet_bound"]["episodes"][0]
     assert row["status"] == "optimal" and row["planned"] == row["guided"] == 3 and row["truncated"] == 0
     assert row["played"] == played.travel_time and row["bound"] == pytest.approx(result.mean_bound)
+    assert row["floor"] < row["bound"]  # the solver proved what the EVs' competition costs
     # the model leaves out slowing into the car park: it is a few seconds per EV early, never late
     assert 0.0 <= row["played_minus_model"] < 10.0 and row["ahead"] == 0
     # every assignment played in SUMO: the plan is the best of them

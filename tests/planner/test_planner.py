@@ -21,7 +21,7 @@ from evcd.planner import (
     PlanStation,
     solve,
 )
-from evcd.planner.schedule import fifo_starts, greedy_plan, lower_starts, plan_value
+from evcd.planner.schedule import fifo_starts, floor_value, greedy_plan, lower_starts, plan_value
 
 TWO = (PlanStation("s0", 1), PlanStation("s1", 1))
 
@@ -54,6 +54,7 @@ def test_the_hand_case_optimum_differs_from_each_evs_own_best_and_from_deciding_
     assert plan_value(HAND, {"a": 0, "b": 0, "c": 0}) == 840.0  # each EV's own best
     assert greedy_plan(HAND) == {"a": 0, "c": 1, "b": 1}  # in turn, each where it starts soonest
     assert plan_value(HAND, greedy_plan(HAND)) == 300.0
+    assert floor_value(HAND) == 30 + 45 + 35  # each at s0 as if alone: the competition costs 165 s
     assert "optimal: 3 guided EVs, mean travel 91.7 s, proven bound 91.7 s" in result.message
 
 
@@ -124,6 +125,7 @@ def test_the_solver_finds_the_best_of_every_assignment_played_through_the_fifo_b
         assert plan_value(problem, {n: result.stations[n] for n in names}) == pytest.approx(best)
         relaxed = solve(problem, PlanSettings(fifo=False))
         assert relaxed.bound <= result.bound + 1e-6, seed
+        assert floor_value(problem) <= best + 1e-6, seed  # nobody waiting for another: no plan does better
 
 
 def test_lower_starts_bound_every_plans_starts():
