@@ -11,6 +11,7 @@
     python scripts/bench.py --suite vector --num-envs 16 --steps 200   # the sweep vector env vs single
     python scripts/bench.py --suite perturbed --episodes 2   # a day built calm vs perturbed (mixed, peak)
     python scripts/bench.py --suite planner --episodes 3 --time-limits 1 10   # the fleet's bound (.[bound])
+    python scripts/bench.py --suite days                 # days built one after the other vs side by side
 
 ``--suite determinism`` trains the same short run twice (the README job cut to 200 training and 20
 evaluation episodes, on ``--scenario`` with ``--evs``; train.py overrides given after the options
@@ -76,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="small demand, short window, paper cut at +1 h")
     p.add_argument("--equivalence", type=int, default=0, metavar="N", help="only measure fast vs paper |dT|")
     p.add_argument("--suite", choices=("env", "replay", "throughput", "engines", "fleet", "determinism",
-                                       "vector", "perturbed", "planner"),
+                                       "vector", "perturbed", "planner", "days"),
                    default="env",
                    help="env (default): episodes, SUMO, replay; replay: the replay buffer alone; "
                         "throughput: the batched engine's speed; engines: batched vs single; "
@@ -85,14 +86,20 @@ def main(argv: list[str] | None = None) -> int:
                         "environment against the single one, in the README job's world; perturbed: "
                         "the README job's day built calm and with every kind of perturbation; "
                         "planner: the fleet's clairvoyant bound read and solved on the fleet table's "
-                        "episodes")  # fmt: skip
+                        "episodes; days: the fleet table's held-out days of seed 0 built one after the "
+                        "other and side by side")  # fmt: skip
     p.add_argument("--episodes", type=int, default=200,
                    help="engines suite: episode seeds (default 200); fleet: episodes (~3); "
                         "perturbed: builds of each day (~2); planner: fleet episodes (~3)")  # fmt: skip
     p.add_argument("--guided-share", type=float, default=1.0,
                    help="fleet and planner suites: guided share (default 1)")  # fmt: skip
-    p.add_argument("--time-limits", type=float, nargs="+", default=[1.0, 10.0],
-                   help="planner suite: the solver's limits to compare (deterministic s; default 1 10)")
+    p.add_argument(
+        "--time-limits",
+        type=float,
+        nargs="+",
+        default=[1.0, 10.0],
+        help="planner suite: the solver's limits to compare (deterministic s; default 1 10)",
+    )
     p.add_argument("--batch-sizes", type=int, nargs="+", default=[25],
                    help="engines suite: batch_episodes values to compare (default 25)")  # fmt: skip
     p.add_argument("--num-envs", type=int, default=16, help="vector suite: sub-environments (default 16)")
@@ -144,6 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.suite == "planner":
         return run_planner(args)
+    if args.suite == "days":
+        return run_days(args)
     if args.suite == "perturbed":
         from evcd.bench.perturbed import perturbed_build_cost
 
@@ -322,6 +331,23 @@ def run_planner(args: argparse.Namespace) -> int:
                  row["solve_s_median"], row["solve_s_max"], 100 * row["gap_median"], 100 * row["gap_max"],
                  row["optimal"], row["episodes"], row["bound_column_minutes"], report["jobs"])  # fmt: skip
     log.info("reading an episode %.1f s (median); wrote %s", report["read_s_median"], args.out)
+    return 0
+
+
+def run_days(args: argparse.Namespace) -> int:
+    """The days suite: the fleet table's held-out days of seed 0 (its world, 600 EVs, the morning peak)
+    built one after the other and two at a time, each from an empty cache."""
+    from evcd.bench.day_builds import day_build_speedup
+    from evcd.experiments.worlds import split_kwargs
+
+    cfg = compose_experiment("fleet", [], conf_dir=CONF)
+    kwargs = split_kwargs(cfg, "eval", 0)
+    world = {k: v for k, v in kwargs.items() if k not in ("guided_share", "cache_dir")}
+    report = day_build_speedup(world, workers=2)
+    atomic_write_text(args.out, json.dumps(report, indent=1))
+    log.info("%d days: one after the other %.1f s, two at a time %.1f s: day_build_speedup %.2f; wrote %s",
+             report["days"], report["one_by_one_s"], report["side_by_side_s"], report["day_build_speedup"],
+             args.out)  # fmt: skip
     return 0
 
 

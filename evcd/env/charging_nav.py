@@ -187,9 +187,10 @@ class ChargingNavEnv(InWorld, gymnasium.Env):
         """The latest observation with its raw parts (``D`` in m, routes); ``None`` before reset."""
         return None if self._episode is None else self._episode.obs
 
-    def prepare(self) -> None:
-        """Build (or verify) every background day's snapshots now instead of at first use."""
-        self.world.prepare()
+    def prepare(self, workers: int | None = None) -> None:
+        """Build (or verify) every background day's snapshots now instead of at first use, the days
+        not cached side by side (``workers`` processes at a time; default: this process's cores)."""
+        self.world.prepare(workers)
 
     def draw_episode(
         self, rng: np.random.Generator, options: Mapping[str, Any] | None = None

@@ -127,6 +127,11 @@ class EpisodeSimulation:
         return self._driver is not None and self._driver.running
 
     # ------------------------------------------------------------------ positioning
+    def cached(self, day: int) -> bool:
+        """Whether day ``day`` is ready without a build (``fast``: every snapshot it needs is cached;
+        ``paper`` builds nothing ahead)."""
+        return day in self._ready or self.protocol != "fast" or self.caches[day].has(self.times)
+
     def prepare(self, day: int) -> None:
         """Make day ``day``'s inputs ready: its routes, and in ``fast`` its snapshots (may build)."""
         if day in self._ready:

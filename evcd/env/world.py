@@ -17,6 +17,7 @@ from __future__ import annotations
 from functools import cached_property
 
 from evcd.env.config import EnvConfig
+from evcd.env.day_builds import available_cores, build_days
 from evcd.env.forecast_source import ForecastSource
 from evcd.env.observation import RouteObserver
 from evcd.env.reward import RewardFn, reward_fn
@@ -75,10 +76,17 @@ class World:
         return RouteObserver(self.stations, self.graph, normalize=cfg.normalize_obs, observe=cfg.observe,
                              forecast=self.forecast)  # fmt: skip
 
-    def prepare(self) -> None:
-        """Build (or verify) every background day's snapshots now instead of at first use."""
+    def prepare(self, workers: int | None = None) -> None:
+        """Build (or verify) every background day's snapshots now instead of at first use: the days not
+        cached yet are built side by side, ``workers`` processes at a time (default: the cores this
+        process may use; :mod:`evcd.env.day_builds`), then each is verified here."""
+        sim = self.simulation
+        missing = [day for day in range(len(self.days)) if not sim.cached(day)]
+        workers = available_cores() if workers is None else workers
+        if len(missing) > 1 and workers > 1:
+            build_days(self.config, missing, workers)
         for day in range(len(self.days)):
-            self.simulation.prepare(day)
+            sim.prepare(day)
 
 
 class InWorld:

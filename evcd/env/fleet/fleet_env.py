@@ -196,15 +196,16 @@ class FleetEnv(InWorld, ParallelEnv):
         """``Discrete(m)``: a station index."""
         return self._act_space
 
-    def prepare(self) -> None:
+    def prepare(self, workers: int | None = None) -> None:
         """Check that every day has EVs to guide, then build (or verify) every day's snapshots now
-        instead of at the first reset.
+        instead of at the first reset, the days not cached side by side (``workers`` processes at a
+        time; default: this process's cores).
 
         Raises:
             ValueError: a day has no charging EV departing in the window (before SUMO starts).
         """
         self.check_days()
-        self.world.prepare()
+        self.world.prepare(workers)
 
     def check_days(self) -> None:
         """Raise ``ValueError`` (no SUMO needed) if a day has no charging EV departing in the window."""
