@@ -5,25 +5,37 @@
 A day not cached is simulated once (:class:`~evcd.sim.snapshots.DayCache`, a few minutes on Jurong
 West) in a SUMO of its own, and libsumo runs one simulation per process: days built one after the
 other leave every other core idle, and so does a sweep whose jobs wait for each other's builds (the
-cache's lock lets one process build a day, the others wait). :func:`build_days` starts one process per
-day missing (``spawn``: nothing that holds libsumo is forked), ``workers`` at a time, each rebuilding
-the world from its :class:`~evcd.env.config.EnvConfig` (the scenario cannot be sent to a process) and
-building that day under the cache's lock, so that processes of other runs that need the same day
-still build it once. A built day is the same files whichever process built it.
+cache's lock lets one process build a day, the others wait). :func:`build_days` starts one fresh
+Python process per day missing (``python -m evcd.env.day_builds``: a plain subprocess, so it works
+inside a launcher's worker process whatever that worker's multiprocessing setup, and nothing that
+holds libsumo is forked), ``workers`` at a time, each rebuilding the world from its
+:class:`~evcd.env.config.EnvConfig` (the scenario cannot be sent to a process) and building that day
+under the cache's lock, so that processes of other runs that need the same day still build it once.
+A built day is the same files whichever process built it.
 """
 
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import os
+import pickle
+import subprocess
+import sys
+import tempfile
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 from evcd.env.config import EnvConfig
 
 log = logging.getLogger(__name__)
+
+#: The last lines of a failed build's output that its error quotes.
+TAIL_LINES = 20
+
+
+class DayBuildError(RuntimeError):
+    """A day's build process failed (the message quotes the end of its output)."""
 
 
 def available_cores() -> int:
@@ -37,21 +49,50 @@ def available_cores() -> int:
 def build_days(config: EnvConfig, days: Sequence[int], workers: int) -> dict[int, float]:
     """Build the snapshots of each of ``days`` (indices into the world's days) in processes of their
     own, ``workers`` at a time; the wall time of each, by day (a day another process had built or was
-    building takes the time it waited)."""
+    building takes the time it waited).
+
+    Raises:
+        DayBuildError: a build process failed (its day and the end of its output named).
+    """
     if not days:
         return {}
-    context = multiprocessing.get_context("spawn")
+    workers = max(1, min(workers, len(days)))
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(days))), mp_context=context) as pool:
-        walls = dict(zip(days, pool.map(_build_day, [config] * len(days), days), strict=True))
-    each = ", ".join(f"day {d}: {w:.1f} s" for d, w in walls.items())
-    log.info("built %d background days %d at a time in %.1f s (%s)", len(days), min(workers, len(days)),
+    walls: dict[int, float] = {}
+    with tempfile.TemporaryDirectory(prefix="evcd_day_build_") as tmp:
+        recipe = Path(tmp) / "config.pickle"
+        recipe.write_bytes(pickle.dumps(config))
+        todo, running = list(days), []
+        while todo or running:
+            while todo and len(running) < workers:
+                day = todo.pop(0)
+                out = open(Path(tmp) / f"day{day}.log", "w+b")  # noqa: SIM115  (closed when it ends)
+                command = [sys.executable, "-m", "evcd.env.day_builds", str(recipe), str(day)]
+                running.append((day, subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT), out,
+                                time.perf_counter()))  # fmt: skip
+            time.sleep(0.2)
+            for entry in [e for e in running if e[1].poll() is not None]:
+                running.remove(entry)
+                day, process, out, started = entry
+                walls[day] = time.perf_counter() - started
+                out.seek(0)
+                tail = out.read().decode(errors="replace").splitlines()[-TAIL_LINES:]
+                out.close()
+                if process.returncode != 0:
+                    for _, other, other_out, _ in running:
+                        other.kill()
+                        other.wait()
+                        other_out.close()
+                    raise DayBuildError(f"building day {day} in a process of its own failed (exit "
+                                        f"{process.returncode}):\n" + "\n".join(tail))  # fmt: skip
+    each = ", ".join(f"day {d}: {walls[d]:.1f} s" for d in days)
+    log.info("built %d background days %d at a time in %.1f s (%s)", len(days), workers,
              time.perf_counter() - t0, each)  # fmt: skip
-    return walls
+    return {d: walls[d] for d in days}
 
 
 def _build_day(config: EnvConfig, day: int) -> float:
-    """In a process of its own: the world of ``config``, its day ``day`` made ready (built if missing)."""
+    """The world of ``config``, its day ``day`` made ready (built if missing); the wall time."""
     from evcd.env.world import World
 
     t0 = time.perf_counter()
@@ -61,3 +102,15 @@ def _build_day(config: EnvConfig, day: int) -> float:
     finally:
         world.simulation.close()
     return time.perf_counter() - t0
+
+
+def main(argv: Sequence[str]) -> int:
+    """``python -m evcd.env.day_builds CONFIG_PICKLE DAY``: build one day (what :func:`build_days` runs)."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    config = pickle.loads(Path(argv[0]).read_bytes())
+    _build_day(config, int(argv[1]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))

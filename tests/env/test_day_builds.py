@@ -3,6 +3,7 @@ each built once, in processes of their own."""
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import hashlib
 import json
@@ -12,7 +13,7 @@ import re
 import pytest
 
 from evcd.env import ChargingNavEnv
-from evcd.env.day_builds import build_days
+from evcd.env.day_builds import DayBuildError, build_days
 from evcd.sim.snapshots import MANIFEST
 from tests.conftest import GRID_ENV
 
@@ -51,3 +52,29 @@ def test_days_built_side_by_side_are_the_days_built_one_after_the_other(grid_env
         assert build_days(side.config, [0, 1, 2], workers=2).keys() == {0, 1, 2}
         assert snapshot_files(side) == one_by_one
     assert len({json.dumps(d) for d in one_by_one}) == 3  # three different days
+
+
+@pytest.mark.slow
+def test_days_are_built_side_by_side_inside_a_joblib_worker(grid_env_dir, tmp_path):
+    """Hydra's joblib launcher runs each job in a loky worker, whose multiprocessing start method a
+    spawned child cannot take: the builds are plain processes, so a job there builds its days too."""
+    from joblib import Parallel, delayed
+
+    kwargs = {"scenario": grid_env_dir, **GRID_ENV, "demand_seeds": [5, 6], "cache_dir": tmp_path}
+    (cached,) = Parallel(n_jobs=2, backend="loky")(delayed(_prepare_in_worker)(kwargs) for _ in range(1))
+    assert cached == [True, True]
+
+
+def _prepare_in_worker(kwargs: dict) -> list[bool]:
+    env = ChargingNavEnv(**kwargs)
+    with env:
+        env.prepare(workers=2)
+        return [env.simulation.caches[d].has(env.simulation.times) for d in range(2)]
+
+
+def test_a_failed_build_names_its_day_and_quotes_its_output(grid_env_dir, tmp_path):
+    env = ChargingNavEnv(scenario=grid_env_dir, **GRID_ENV, demand_seeds=[0, 1], cache_dir=tmp_path)
+    broken = dataclasses.replace(env.config, scenario=tmp_path / "no_such_city")
+    with pytest.raises(DayBuildError, match=r"building day \d in a process of its own failed \(exit 1\)"):
+        build_days(broken, [0, 1], workers=2)
+    env.close()
