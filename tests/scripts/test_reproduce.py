@@ -37,7 +37,7 @@ from tests.conftest import CONF, ROOT, SCRIPTS, run_refusals, run_script, shared
 
 PAGES = ROOT / "docs" / "reproduce"
 #: The shipped pages and their jobs (what --dry-run counts).
-SHIPPED_JOBS = {"results": 90, "fleet": 90, "readme": 20, "perturbed": 25}
+SHIPPED_JOBS = {"results": 90, "fleet": 90, "readme": 20, "perturbed": 25, "room": 45}
 
 
 def tiny_page(overrides: list[str]) -> dict[str, Any]:
@@ -192,7 +192,7 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(reproduced, tmp
     out = tmp_path / "outs"
     check = ["--root", root, "--check"]
     cases = {
-        "no page 'nope': the pages are fleet, perturbed, readme, results": ["nope", "--out", out / "a"],
+        "no page 'nope': the pages are fleet, perturbed, readme, results, room": ["nope", "--out", out / "a"],
         "is a fleet run (task=fleet); the jobs of page page here are single-target (task=single)":
             [page, *check, fleet, "--out", out / "b"],
         "is a run of regime 'table' (experiment=table); the jobs of page page here are of regime 'peak'":
@@ -330,7 +330,7 @@ def test_a_page_definition_is_checked_with_the_allowed_values_named(tmp_path):
         {**page, "sweeps": [sweep, {**sweep, "name": "again"}], "renders": []}
     )
     with pytest.raises(
-        PageError, match=r"no page 'results\.yml': the pages are fleet, perturbed, readme, results"
+        PageError, match=r"no page 'results\.yml': the pages are fleet, perturbed, readme, results, room"
     ):
         load_page("results.yml", PAGES)
 
