@@ -68,8 +68,8 @@ def build_days(config: EnvConfig, days: Sequence[int], workers: int) -> dict[int
                 day = todo.pop(0)
                 out = open(Path(tmp) / f"day{day}.log", "w+b")  # noqa: SIM115  (closed when it ends)
                 command = [sys.executable, "-m", "evcd.env.day_builds", str(recipe), str(day)]
-                running.append((day, subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT), out,
-                                time.perf_counter()))  # fmt: skip
+                process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, env=_child_env())
+                running.append((day, process, out, time.perf_counter()))
             time.sleep(0.2)
             for entry in [e for e in running if e[1].poll() is not None]:
                 running.remove(entry)
@@ -89,6 +89,14 @@ def build_days(config: EnvConfig, days: Sequence[int], workers: int) -> dict[int
     log.info("built %d background days %d at a time in %.1f s (%s)", len(days), workers,
              time.perf_counter() - t0, each)  # fmt: skip
     return {d: walls[d] for d in days}
+
+
+def _child_env() -> dict[str, str]:
+    """This process's environment, the folder that holds this evcd first on the import path (so that
+    a child finds the same evcd, installed or a checkout run in place)."""
+    home = str(Path(__file__).resolve().parents[2])
+    rest = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p and p != home]
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([home, *rest])}
 
 
 def _build_day(config: EnvConfig, day: int) -> float:
