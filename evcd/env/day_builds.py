@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from evcd.env.config import EnvConfig
+from evcd.sim.snapshots import DayCache, snapshot_times
 
 log = logging.getLogger(__name__)
 
@@ -100,15 +101,12 @@ def _child_env() -> dict[str, str]:
 
 
 def _build_day(config: EnvConfig, day: int) -> float:
-    """The world of ``config``, its day ``day`` made ready (built if missing); the wall time."""
-    from evcd.env.world import World
-
+    """Day ``day`` of the world of ``config`` made ready (its snapshots built if missing, as the world's
+    simulation would: :meth:`~evcd.env.simulation.EpisodeSimulation.prepare`); the wall time."""
     t0 = time.perf_counter()
-    world = World(config)
-    try:
-        world.simulation.prepare(day)
-    finally:
-        world.simulation.close()
+    _, days = config.load()
+    times = snapshot_times(config.departure_window, config.snapshot_every)
+    DayCache(days[day], config.cache_dir).ensure(times)
     return time.perf_counter() - t0
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -28,8 +28,23 @@ from evcd.report.markdown import format_stat, markdown_table
 from evcd.report.paired import PairedStat, paired_cell, paired_stat
 from evcd.report.seed_stats import MIN_GAP_S, GapShare, gap_share, seed_interval
 
-if TYPE_CHECKING:
-    from evcd.report.fleet_table import Cell, FleetJob
+Cell = tuple[str, int, float]  # (regime, evs, guided_share)
+
+
+class FleetJob(Protocol):
+    """What the room tables read of a fleet job (:class:`evcd.report.fleet_table.FleetJob`)."""
+
+    regime: str
+    agent: str
+    evs: int
+    guided_share: float
+    seed: int
+    guided_travel: float
+    bound: float
+    train_episodes: int
+    per_episode: tuple[tuple[int, int, float, float], ...]
+    per_episode_bound: tuple[tuple[int, int, float], ...]
+
 
 #: The clairvoyant bound's jobs (``agent=fleet_bound``): their travel time is the played plan's, a column
 #: like a dispatcher's; their ``bound`` the proven lower bound of the model.

@@ -32,7 +32,7 @@ import numpy as np
 
 from evcd.loops.run_files import ENVIRONMENTS
 from evcd.report.figures import agent_colors, plot_results_bars, plot_validation_curves
-from evcd.report.fleet_room import BOUND_AGENT, room_markdown
+from evcd.report.fleet_room import BOUND_AGENT, Cell, room_markdown
 from evcd.report.markdown import format_stat, markdown_table, num
 from evcd.report.paired import PairedStat, paired_cell, paired_stat, per_seed_text
 from evcd.report.seed_stats import SeedStat, seed_interval
@@ -178,9 +178,6 @@ def _rank(agent: str) -> tuple[int, str]:
 def sort_key(job: FleetJob) -> tuple[Any, ...]:
     """Rows are sorted by regime, EV count, guided share, dispatcher, seed."""
     return job.regime, job.evs, job.guided_share, _rank(job.agent), job.seed
-
-
-Cell = tuple[str, int, float]  # (regime, evs, guided_share)
 
 
 def _cells(jobs: Sequence[FleetJob]) -> list[Cell]:
