@@ -158,7 +158,8 @@ def room_markdown(
         rule = strongest_rule(jobs, c)
         if rule is not None:
             to_plan, to_proven = to_bound(jobs, c, rule, proven=False), to_bound(jobs, c, rule)
-            gap = gap_share(greedy, _seed_means(jobs, c, rule), bound, rng)
+            gap = (gaps[others.index(rule)] if rule in others
+                   else gap_share(greedy, _seed_means(jobs, c, rule), bound, rng))  # fmt: skip
             from_rule.append([
                 *labels[c], rule, format_stat(seed_interval(_seed_means(jobs, c, rule).values())),
                 paired_cell(to_plan) if to_plan else "—", paired_cell(to_proven) if to_proven else "—",
