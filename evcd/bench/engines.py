@@ -166,22 +166,3 @@ def parallel_scaling(env_kwargs: Mapping[str, Any], episodes: int, batch_episode
         pool.map(_engine_job, jobs)
         two = 2 * episodes / (time.perf_counter() - t0)
     return {"one_process_episodes_per_s": one, "two_processes_episodes_per_s": two, "scaling": two / one}
-
-
-def table_minutes(
-    eval_run_s: float,
-    hindsight_run_s: float,
-    train_run_s: float,
-    scaling: float,
-    seeds: int = 5,
-    evs_levels: int = 3,
-    day_build_s: float = 0.0,
-    days: int = 2,
-) -> float:
-    """The results sweep's wall time on this machine (minutes), extrapolated from measured runs:
-    per EV count and seed, seven evaluation runs (random, greedy, queue_aware; dqn and
-    dueling_ddqn, each with its greedy baseline), the fixed stations of the hindsight bound in one
-    engine run, and two trainings; jobs run two at a time (``scaling``: the measured two-process
-    speed-up); plus one build per EV count and background day."""
-    per_job = 7 * eval_run_s + hindsight_run_s + 2 * train_run_s
-    return (evs_levels * seeds * per_job / scaling + evs_levels * days * day_build_s) / 60.0

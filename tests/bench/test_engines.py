@@ -39,10 +39,3 @@ def test_rates_and_scaling_are_measured(grid_kwargs):
     assert all(r["episodes_per_s"] > 0 and r["transitions"] >= r["episodes"] for r in rates.values())
     scaling = engine_bench.parallel_scaling(grid_kwargs, 4, 2)
     assert scaling["scaling"] > 0 and math.isfinite(scaling["scaling"])
-
-
-def test_table_minutes_adds_up():
-    # 7 evaluation runs of 10 s, a 20 s hindsight run, 2 trainings of 100 s: 290 s per job; 15 jobs,
-    # two at a time at 1.5x; plus 3 x 2 day builds of 30 s
-    minutes = engine_bench.table_minutes(10.0, 20.0, 100.0, 1.5, day_build_s=30.0)
-    assert minutes == pytest.approx((15 * 290 / 1.5 + 180) / 60)

@@ -8,5 +8,7 @@ multiruns of the scripts, rendered, and compared with the data the page commits.
 - :mod:`~evcd.report.reproduce.launch`: running a page's sweeps into an output folder (resumable),
   timed, and the launcher plugins they need;
 - :mod:`~evcd.report.reproduce.render`: the page's tables from the jobs, their wall times and stamp;
-- :mod:`~evcd.report.reproduce.check`: where a rendering differs from the committed data, cell by cell.
+- :mod:`~evcd.report.reproduce.check`: where a rendering differs from the committed data, cell by cell;
+- :mod:`~evcd.report.reproduce.cost`: what a page's command costs, measured on its small version
+  (``bench.py --suite reproduce``).
 """
