@@ -235,6 +235,8 @@ def fleet_markdown(collection: Collection) -> str:
         f"{sorted({j.episodes for j in jobs})} evaluation fleet episodes per job on days {days}.",
         "",
     ]
+    if regimes == 1:  # the world is no column: say which it is
+        lines += [f"World: `{cells[0][0]}`.", ""]
     lines += [*stamp_markdown([j.stamp for j in jobs], ENVIRONMENTS["fleet"]), ""]
     if collection.gaps:
         lines += [

@@ -126,6 +126,7 @@ def test_the_fleet_table_by_hand(tmp_path) -> None:
     assert len(out.collection.jobs) == len(AGENTS) * len(SEEDS) * len(SHARES) and not out.collection.gaps
     # jobs written without the environment's and the code's records: the page says so before anything
     assert "**Made with another environment than today's `evcd_fleet_v1`**" in md.split("## ")[0]
+    assert "World: `fleet`." in md.split("## ")[0]  # one world: named in the header, no column
     assert row(md, "## Paired differences on the guided EVs", ["400", "1"])[
         "dueling_ddqn - central"
     ].startswith("-20.0 [")
