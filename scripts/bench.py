@@ -94,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
                         "the README job's day built calm and with every kind of perturbation; "
                         "planner: the fleet's clairvoyant bound read and solved on the fleet table's "
                         "episodes; days: the fleet table's held-out days of seed 0 built one after the "
-                        "other and side by side")  # fmt: skip
+                        "other and side by side; reproduce: a page's reproduce command on its small "
+                        "version, cold and warm")  # fmt: skip
     p.add_argument("--episodes", type=int, default=200,
                    help="engines suite: episode seeds (default 200); fleet: episodes (~3); "
                         "perturbed: builds of each day (~2); planner: fleet episodes (~3)")  # fmt: skip
