@@ -135,7 +135,7 @@ def reproduce_cost(
         if code != 0:
             raise PageError(f"the small version of page {page.name} ({name}) failed (exit {code}): "
                             f"see {logfile}")  # fmt: skip
-        runs[name] = {"wall_s": wall, **measured_wall(out)}
+        runs[name] = {**measured_wall(out), "wall_s": wall}  # the whole command's, rendering included
         log.info("page %s, small version, %s: %.1f s", page.name, name, wall)
     cold, warm = runs["cold"], runs["warm"]
     jobs = {s.name: len(s.jobs(extra)) for s in page.sweeps}
