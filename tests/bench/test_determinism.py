@@ -97,6 +97,6 @@ def test_the_suite_trains_twice_in_fresh_processes_and_finds_them_identical(scri
 
 
 @pytest.mark.slow
-def test_overrides_are_refused_outside_the_determinism_suite(tmp_path):
+def test_overrides_are_refused_outside_the_suites_that_take_them(tmp_path):
     proc = run_script("bench.py", "--suite", "replay", "--out", tmp_path / "x.json", "agent=dqn")
-    assert proc.returncode == 2 and "for --suite determinism only" in proc.stderr
+    assert proc.returncode == 2 and "for --suite determinism or reproduce only" in proc.stderr
