@@ -100,14 +100,12 @@ def _child_env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": os.pathsep.join([home, *rest])}
 
 
-def _build_day(config: EnvConfig, day: int) -> float:
+def _build_day(config: EnvConfig, day: int) -> None:
     """Day ``day`` of the world of ``config`` made ready (its snapshots built if missing, as the world's
-    simulation would: :meth:`~evcd.env.simulation.EpisodeSimulation.prepare`); the wall time."""
-    t0 = time.perf_counter()
+    simulation would: :meth:`~evcd.env.simulation.EpisodeSimulation.prepare`). The parent times it."""
     _, days = config.load()
     times = snapshot_times(config.departure_window, config.snapshot_every)
     DayCache(days[day], config.cache_dir).ensure(times)
-    return time.perf_counter() - t0
 
 
 def main(argv: Sequence[str]) -> int:
