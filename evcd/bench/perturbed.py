@@ -17,7 +17,7 @@ from typing import Any
 
 from evcd.env.config import EnvConfig
 from evcd.sim.driver import SumoDriver
-from evcd.sim.snapshots import DayCache, DaySpec, snapshot_times
+from evcd.sim.snapshots import DayCache, DaySpec
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ def perturbed_build_cost(
     calm_cfg = EnvConfig(**{**env_kwargs, "perturbations": None})
     hit_cfg = EnvConfig(**{**env_kwargs, "perturbations": dict(perturbations)})
     calm, hit = calm_cfg.load()[1][day], hit_cfg.load()[1][day]
-    times = snapshot_times(calm_cfg.departure_window, calm_cfg.snapshot_every)
+    times = calm_cfg.snapshot_times()
     rows: list[dict[str, Any]] = []
     for r in range(repeats):
         for name, spec in (("calm", calm), ("perturbed", hit)):

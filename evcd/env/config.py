@@ -13,7 +13,7 @@ from evcd.forecast.registry import FORECASTERS, SETTINGS
 from evcd.scenario.demand import DAY, DemandConfig
 from evcd.scenario.scenario import JURONG_WEST, Scenario, load_scenario
 from evcd.sim.perturbations import Perturbations
-from evcd.sim.snapshots import DaySpec
+from evcd.sim.snapshots import DaySpec, snapshot_times
 from evcd.utils.validation import check_choice, check_int, check_real, is_integer
 
 PROTOCOLS = ("fast", "paper")
@@ -158,6 +158,11 @@ class EnvConfig:
         days = [DaySpec(scenario, self.demand_config, seed, **self._events(scenario, seed), **common)
                 for seed in self.demand_seeds]  # fmt: skip
         return scenario, days
+
+    def snapshot_times(self) -> list[float]:
+        """The times of day (s) of the days' snapshots: every ``snapshot_every`` s over the
+        departure window (:func:`evcd.sim.snapshots.snapshot_times`)."""
+        return snapshot_times(self.departure_window, self.snapshot_every)
 
     def history_days(self, scenario: Scenario) -> list[DaySpec]:
         """The days the history forecaster is fitted on (``forecast_days``: the training days)."""

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from evcd.env.config import EnvConfig
-from evcd.sim.snapshots import DayCache, snapshot_times
+from evcd.sim.snapshots import DayCache
 
 log = logging.getLogger(__name__)
 
@@ -104,7 +104,7 @@ def _build_day(config: EnvConfig, day: int) -> None:
     """Day ``day`` of the world of ``config`` made ready (its snapshots built if missing, as the world's
     simulation would: :meth:`~evcd.env.simulation.EpisodeSimulation.prepare`). The parent times it."""
     _, days = config.load()
-    times = snapshot_times(config.departure_window, config.snapshot_every)
+    times = config.snapshot_times()
     DayCache(days[day], config.cache_dir).ensure(times)
 
 

@@ -25,7 +25,7 @@ from evcd.env.simulation import EpisodeSimulation
 from evcd.scenario.routing import RoadGraph
 from evcd.scenario.scenario import Scenario
 from evcd.scenario.stations_file import Station
-from evcd.sim.snapshots import DayCache, DaySpec, snapshot_times
+from evcd.sim.snapshots import DayCache, DaySpec
 
 
 class World:
@@ -53,7 +53,7 @@ class World:
         cfg = self.config
         settings = {k: v for k, v in cfg.forecaster.items() if k != "name"}
         history = [DayCache(spec, cfg.cache_dir) for spec in cfg.history_days(self.scenario)]
-        times = snapshot_times(cfg.departure_window, cfg.snapshot_every)
+        times = cfg.snapshot_times()
         return ForecastSource(
             cfg.forecaster["name"], settings, [st.id for st in self.stations], history, times
         )

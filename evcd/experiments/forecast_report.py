@@ -19,7 +19,7 @@ from typing import Any
 from evcd.env.config import EnvConfig
 from evcd.env.forecast_source import day_timeline
 from evcd.forecast import FORECASTERS, OccupancyTimeline, forecast_errors, make_forecaster
-from evcd.sim.snapshots import DayCache, snapshot_times
+from evcd.sim.snapshots import DayCache
 
 
 def day_timelines(kwargs: Mapping[str, Any]) -> list[OccupancyTimeline]:
@@ -28,7 +28,7 @@ def day_timelines(kwargs: Mapping[str, Any]) -> list[OccupancyTimeline]:
     skip = ("observe", "forecaster", "forecast_days", "guided_share")
     config = EnvConfig(**{k: v for k, v in kwargs.items() if k not in skip})
     scenario, days = config.load()
-    times = snapshot_times(config.departure_window, config.snapshot_every)
+    times = config.snapshot_times()
     ids = [st.id for st in scenario.stations]
     return [day_timeline(DayCache(spec, config.cache_dir), times, ids) for spec in days]
 
