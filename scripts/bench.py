@@ -424,6 +424,7 @@ def run_engine_suite(args: argparse.Namespace, env_kwargs: dict, replay: dict) -
     learner = learner_config(regime.learner)
     learning = engine_bench.learning_rate({**peak, "reward": "time"}, learner, 1000, 25)
     scaling = engine_bench.parallel_scaling(peak, 200, 25)
+    routes = engine_bench.kept_routes({**peak, "reward": "time"}, 400, 25)
 
     def speedup(r: dict) -> float:
         return r["batched"]["episodes_per_s"] / r["single"]["episodes_per_s"]
@@ -437,11 +438,13 @@ def run_engine_suite(args: argparse.Namespace, env_kwargs: dict, replay: dict) -
         "per_sample_update_us": replay["per_sample_update_us"],
         "eval_run_100_s": eval_run["wall_s"],
         "train_episodes_per_second": learning["episodes_per_s"],
+        "kept_routes_speedup": routes["speedup"],
+        "kept_routes_same_rows": routes["same_rows"],
         "goals": {"batched_speedup": ">= 10 (aim 30)", "parallel_scaling_2": ">= 1.7",
                   "per_sample_update_us": "<= 100"},
     }  # fmt: skip
     return {"summary": summary, "peak": peak_rates, "peak_batch100": peak_100, "whole_day": day_rates,
-            "learning": learning, "scaling": scaling, "replay": replay}  # fmt: skip
+            "learning": learning, "scaling": scaling, "routes": routes, "replay": replay}  # fmt: skip
 
 
 if __name__ == "__main__":

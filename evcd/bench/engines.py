@@ -2,9 +2,13 @@
 
 - :func:`compare_engines`: the travel time of every episode seed under both engines, for greedy and
   for each fixed station, at one or more ``batch_episodes``.
-- :func:`measure_throughput`: episodes per second of both engines on the same seeds (morning peak
-  and whole day), transitions per second of a learning DQN on the engine, the scaling of two engine
-  processes, and the extrapolated wall time of the results sweep.
+- :func:`engine_rates`, :func:`learning_rate`, :func:`parallel_scaling`: episodes per second of both
+  engines on the same seeds, transitions per second of a learning DQN on the engine, the scaling of
+  two engine processes (``scripts/bench.py --suite throughput`` runs them on the morning peak and
+  the whole day).
+- :func:`kept_routes`: the observer's routes kept on calm roads against found anew at every
+  observation (:class:`~evcd.env.observation.RouteObserver`'s ``static_routes``): the rate of each and
+  whether every episode is the same.
 
 Every ratio is measured in the same run, side by side. libsumo runs one simulation per process, so
 each engine runs in turn (and the scaling test in spawned subprocesses).
@@ -12,6 +16,7 @@ each engine runs in turn (and the scaling test in spawned subprocesses).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import multiprocessing
 import time
@@ -122,6 +127,27 @@ def engine_rates(
     batched = _rate(runner, agent, episode_specs(0, range(batched_episodes)))
     runner.close()
     return {"single": single, "batched": batched}
+
+
+def kept_routes(env_kwargs: Mapping[str, Any], episodes: int, batch_episodes: int) -> dict[str, Any]:
+    """Greedy episodes per second of the batched engine with the observer's routes found anew at every
+    observation and kept (the world's default on calm roads), on the same seeds; ``same_rows``: every
+    episode's row the same but its wall time."""
+    out: dict[str, Any] = {}
+    rows: dict[str, list[tuple[Any, ...]]] = {}
+    for name, keep in (("found_anew", False), ("kept", True)):
+        runner = BatchedRunner(ChargingNavEnv(**env_kwargs), batch_episodes)
+        runner.prepare()
+        runner.env.observer.static_routes = keep
+        agent = make_agent_for_env("greedy", runner.env, np.random.default_rng(0))
+        t0 = time.perf_counter()
+        played = runner.run(episode_specs(0, range(episodes)), agent, explore=False, learn=False)
+        wall = time.perf_counter() - t0
+        out[name] = {"episodes": len(played), "wall_s": wall, "episodes_per_s": len(played) / wall}
+        rows[name] = [dataclasses.astuple(dataclasses.replace(r, wall_s=0.0)) for r in played]
+        runner.close()
+    speedup = out["kept"]["episodes_per_s"] / out["found_anew"]["episodes_per_s"]
+    return {**out, "speedup": speedup, "same_rows": rows["kept"] == rows["found_anew"]}
 
 
 def learning_rate(

@@ -14,6 +14,10 @@ For each station ``i`` (in the scenario's order), from the target's current posi
 
 Cost per observation: one ``findRoute`` per station (a few more in the rare loop case) and one
 ``getLastStepVehicleNumber`` per distinct edge of the union of the routes; no per-vehicle calls.
+Where the roads never change (``static_routes``: no road events in the world's days), a route is
+found once per (edge, destination) and kept: SUMO's ``findRoute`` plans with the edges' fixed
+weights (length over speed limit; the background vehicles' routing devices do not change them), so
+it gives the same route every time, and the observations are the same with and without keeping.
 
 Observation options (``EnvConfig.observe``, off by default: what a navigation service knows) add
 blocks after these, in this order:
@@ -205,6 +209,9 @@ class RouteObserver:
             ``forecast``; with the fleet's ``guided_ahead`` it makes no block but computes ``T``).
         forecast: with ``forecast``, ``forecast(now, arrival, controller)`` -> the forecast vehicles
             at each station at its ``arrival`` time (a :class:`~evcd.env.forecast_source.ForecastSource`).
+        static_routes: the router's edge weights and the lanes' permissions never change (no road
+            events): keep each route found (module docstring). Code that changes them through the API
+            (``lane.setMaxSpeed``, ``edge.adaptTraveltime``, ...) must call :meth:`clear_routes`.
     """
 
     def __init__(
@@ -215,6 +222,7 @@ class RouteObserver:
         normalize: bool = False,
         observe: Sequence[str] = (),
         forecast: Callable[[float, np.ndarray, ChargingController], np.ndarray] | None = None,
+        static_routes: bool = False,
     ) -> None:
         self.stations = tuple(stations)
         self.graph = graph
@@ -233,6 +241,8 @@ class RouteObserver:
             raise ValueError("observe=[forecast] needs a forecaster (ChargingNavEnv's forecaster=...)")
         self.forecast = forecast
         self._edge_len = {st.edge: float(graph.lengths[graph.index[st.edge]]) for st in self.stations}
+        self.static_routes = static_routes
+        self._found: dict[tuple[str, str], tuple[float, tuple[str, ...]]] = {}
 
     @property
     def size(self) -> int:
@@ -362,7 +372,19 @@ class RouteObserver:
                 best = (d, (road, *back_edges))
         return best
 
+    def clear_routes(self) -> None:
+        """Forget the routes kept (``static_routes``): after a change of edge weights or permissions."""
+        self._found.clear()
+
     def _find(self, api: Any, src: str, dst: str) -> tuple[float, tuple[str, ...]]:
+        if self.static_routes:
+            found = self._found.get((src, dst))
+            if found is None:
+                found = self._found[src, dst] = self._router(api, src, dst)
+            return found
+        return self._router(api, src, dst)
+
+    def _router(self, api: Any, src: str, dst: str) -> tuple[float, tuple[str, ...]]:
         try:
             stage = api.simulation.findRoute(src, dst, vType=self.vtype)
         except SUMO_ERRORS as exc:

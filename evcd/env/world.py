@@ -74,7 +74,13 @@ class World:
         configured units."""
         cfg = self.config
         return RouteObserver(self.stations, self.graph, normalize=cfg.normalize_obs, observe=cfg.observe,
-                             forecast=self.forecast)  # fmt: skip
+                             forecast=self.forecast, static_routes=self.static_roads)  # fmt: skip
+
+    @property
+    def static_roads(self) -> bool:
+        """Whether no day of the world plays road events (:mod:`evcd.sim.road_player`): the roads'
+        speed limits, permissions and the router's weights stay as the network has them."""
+        return all(spec.roads.empty for spec in self.days)
 
     def prepare(self, workers: int | None = None) -> None:
         """Build (or verify) every background day's snapshots now instead of at first use: the days not

@@ -39,3 +39,10 @@ def test_rates_and_scaling_are_measured(grid_kwargs):
     assert all(r["episodes_per_s"] > 0 and r["transitions"] >= r["episodes"] for r in rates.values())
     scaling = engine_bench.parallel_scaling(grid_kwargs, 4, 2)
     assert scaling["scaling"] > 0 and math.isfinite(scaling["scaling"])
+
+
+def test_kept_routes_play_the_same_episodes(grid_kwargs):
+    out = engine_bench.kept_routes(grid_kwargs, 6, 3)
+    assert out["kept"]["episodes"] == out["found_anew"]["episodes"] == 6
+    assert out["same_rows"] is True
+    assert out["speedup"] > 0 and math.isfinite(out["speedup"])

@@ -115,3 +115,30 @@ def test_loop_back_when_past_the_car_park(make_small_env):
     while not (terminated or truncated):
         _, _, terminated, truncated, info = env.step(0)
     assert terminated and info["reason"] == "charging" and info["station_id"] == "cs1"
+
+
+def test_calm_roads_keep_each_route_and_changing_roads_ask_sumo_anew(make_small_env):
+    """A calm world keeps each route it found: SUMO plans with fixed weights, so the kept routes are
+    the routes SUMO gives later on, with traffic on the roads. A world with road events keeps none:
+    a slowed edge changes SUMO's route."""
+    env = make_small_env(busy_day(), decision_interval=10)
+    assert env.world.static_roads and env.observer.static_routes
+    env.reset(seed=0, options={"departure": 200, "origin": "A3B3"})
+    terminated = truncated = False
+    for _ in range(6):
+        if terminated or truncated:
+            break
+        _, _, terminated, truncated, _ = env.step(1)
+    api, observer = env.simulation.api, env.observer
+    kept = dict(observer._found)
+    assert len(kept) >= 4 and api.vehicle.getIDCount() > 1
+    for (src, dst), route in kept.items():
+        assert observer._router(api, src, dst) == route
+    (src, dst), (_, edges) = next((k, r) for k, r in kept.items() if len(r[1]) > 2)
+    middle = next(e for e in edges[1:-1] if not e.startswith(":"))
+    for i in range(api.edge.getLaneNumber(middle)):
+        api.lane.setMaxSpeed(f"{middle}_{i}", 0.5)
+    assert observer._router(api, src, dst)[1] != edges
+    rain = {"rain": {"chance": 1.0, "speed_factor": 0.5, "start_window": [0, 60]}}
+    wet = make_small_env([], perturbations=rain)
+    assert not wet.world.static_roads and not wet.observer.static_routes
