@@ -438,6 +438,7 @@ def run_engine_suite(args: argparse.Namespace, env_kwargs: dict, replay: dict) -
         "per_sample_update_us": replay["per_sample_update_us"],
         "eval_run_100_s": eval_run["wall_s"],
         "train_episodes_per_second": learning["episodes_per_s"],
+        "going_back_share": learning["going_back_share"],
         "kept_routes_speedup": routes["speedup"],
         "kept_routes_same_rows": routes["same_rows"],
         "goals": {"batched_speedup": ">= 10 (aim 30)", "parallel_scaling_2": ">= 1.7",

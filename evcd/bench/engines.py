@@ -3,9 +3,9 @@
 - :func:`compare_engines`: the travel time of every episode seed under both engines, for greedy and
   for each fixed station, at one or more ``batch_episodes``.
 - :func:`engine_rates`, :func:`learning_rate`, :func:`parallel_scaling`: episodes per second of both
-  engines on the same seeds, transitions per second of a learning DQN on the engine, the scaling of
-  two engine processes (``scripts/bench.py --suite throughput`` runs them on the morning peak and
-  the whole day).
+  engines on the same seeds, transitions per second of a learning DQN on the engine and the share of
+  it spent restarting SUMO to go back in time, the scaling of two engine processes
+  (``scripts/bench.py --suite throughput`` runs them on the morning peak and the whole day).
 - :func:`kept_routes`: the observer's routes kept on calm roads against found anew at every
   observation (:class:`~evcd.env.observation.RouteObserver`'s ``static_routes``): the rate of each and
   whether every episode is the same.
@@ -154,7 +154,8 @@ def learning_rate(
     env_kwargs: Mapping[str, Any], learner: DQNConfig, episodes: int, batch_episodes: int
 ) -> dict[str, float]:
     """Transitions per second of a Dueling DDQN with the hyperparameters ``learner`` learning on the
-    engine (training episodes)."""
+    engine (training episodes), and what going back in time cost: SUMO's restarts before a snapshot
+    load to an earlier time (:mod:`evcd.env.simulation`), their count, seconds and share of the wall time."""
     import torch
 
     torch.set_num_threads(1)
@@ -162,8 +163,11 @@ def learning_rate(
     runner.prepare()
     agent = make_agent_for_env("dueling_ddqn", runner.env, np.random.default_rng(0), config=learner)
     out = _rate(runner, agent, episode_specs(0, range(episodes), TRAIN_STREAM), learn=True)
+    sim = runner.env.simulation
     runner.close()
-    return {**out, "gradient_steps": float(agent.gradient_steps)}
+    back = {"going_back_restarts": float(sim.back_restarts), "going_back_s": sim.back_restart_s,
+            "going_back_share": sim.back_restart_s / out["wall_s"]}  # fmt: skip
+    return {**out, "gradient_steps": float(agent.gradient_steps), **back}
 
 
 def _engine_job(args: tuple[dict[str, Any], int, int, int]) -> dict[str, float]:

@@ -41,6 +41,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from pathlib import Path
+from time import perf_counter
 from typing import Any
 
 from evcd.env.episode_rules import TIME_EPS
@@ -102,6 +103,8 @@ class EpisodeSimulation:
         self._roads: RoadPlayer | None = None  # plays the running day's road events, if any
         self._ready: set[int] = set()  # days whose snapshots (or routes) this process verified
         self.restarts = 0  # SUMO starts (for the benchmark)
+        self.back_restarts = 0  # of which to go back in time (needs_restart)
+        self.back_restart_s = 0.0  # their wall time: what reproducibility costs (scripts/bench.py)
 
     # ------------------------------------------------------------------ state
     @property
@@ -164,7 +167,13 @@ class EpisodeSimulation:
         cache = self.caches[day]
         for attempt in range(2):
             snap = cache.latest_before(time)
-            if not self.running or self._day != day or needs_restart(self.time, snap.time):
+            back = self.running and self._day == day and needs_restart(self.time, snap.time)
+            if back:
+                started = perf_counter()
+                self._restart(day)
+                self.back_restarts += 1
+                self.back_restart_s += perf_counter() - started
+            elif not self.running or self._day != day:
                 self._restart(day)
             try:
                 t = cache.load(snap, self.driver, self.controller)

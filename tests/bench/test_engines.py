@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from evcd.agents.dqn import DQNConfig
 from evcd.bench import engines as engine_bench
 from tests.conftest import GRID_ENV
 
@@ -46,3 +47,12 @@ def test_kept_routes_play_the_same_episodes(grid_kwargs):
     assert out["kept"]["episodes"] == out["found_anew"]["episodes"] == 6
     assert out["same_rows"] is True
     assert out["speedup"] > 0 and math.isfinite(out["speedup"])
+
+
+def test_the_learning_rate_counts_what_going_back_in_time_cost(grid_kwargs):
+    """Two batches of one day: the second starts before the first one's end, so SUMO restarts once."""
+    learner = DQNConfig(hidden=(8,), learning_starts=4, batch_size=4)
+    out = engine_bench.learning_rate(grid_kwargs, learner, 6, 3)
+    assert out["episodes"] == 6 and out["transitions_per_s"] > 0
+    assert out["going_back_restarts"] >= 1 and 0 < out["going_back_share"] < 1
+    assert out["going_back_s"] == pytest.approx(out["going_back_share"] * out["wall_s"])

@@ -59,9 +59,9 @@ def test_going_back_in_time_replays_the_day_of_a_fresh_sumo(busy_sim):
     sim = busy_sim
     sim.start_at(0, 1250.0)  # the snapshot at 1200
     sim.driver.step(until=2600.0)  # on past the snapshots at 1500 ... 2400, queues at the stations
-    restarts = sim.restarts
+    restarts, back = sim.restarts, sim.back_restarts
     sim.start_at(0, 1300.0)  # back to the snapshot at 1200
-    assert sim.restarts == restarts + 1
+    assert sim.restarts == restarts + 1 and sim.back_restarts == back + 1 and sim.back_restart_s > 0
     back = trajectory(sim, until=2600.0)
     sim.close()
     sim.start_at(0, 1300.0)
@@ -76,9 +76,9 @@ def test_a_load_going_forward_keeps_sumo_and_replays_the_day_of_a_fresh_sumo(bus
     sim = busy_sim
     sim.start_at(0, 1250.0)
     sim.driver.step(until=1400.0)
-    restarts = sim.restarts
+    restarts, back = sim.restarts, sim.back_restarts
     sim.start_at(0, 1850.0)  # forward: the snapshot at 1800
-    assert sim.restarts == restarts
+    assert sim.restarts == restarts and sim.back_restarts == back
     forward = trajectory(sim, until=2800.0)
     sim.close()
     sim.start_at(0, 1850.0)
