@@ -35,10 +35,12 @@ from evcd.cli.errors import refuse_removed_settings, stop_on_bad_setting
 from evcd.cli.params import agent_params, check_learner_overrides, learner_config
 from evcd.cli.run_record import write_run_record
 from evcd.env import ChargingNavEnv
+from evcd.env.day_builds import available_cores
 from evcd.env.fleet import FleetEnv
 from evcd.env.runners import FleetRunner, check_engine, make_runner
 from evcd.experiments.schema import register_configs
 from evcd.experiments.worlds import check_forecaster, split_days, split_kwargs
+from evcd.loops.beside import MIN_EPISODES, RunnerRecipe, rule_episodes
 from evcd.loops.fleet import fleet_dispatcher_learns
 from evcd.loops.fleet_bound import fleet_learns, make_fleet_dispatcher
 from evcd.loops.hindsight import check_rule, dispatcher_learns, make_dispatcher
@@ -122,11 +124,13 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         raise ValueError("agent.checkpoint is for scripts/evaluate.py; to continue a training run use "
                          "resume=true with its hydra.run.dir")  # fmt: skip
     params.pop("checkpoint", None)
-    envs = {split: ChargingNavEnv(**split_kwargs(cfg, split, seed)) for split in ("train", "eval")}
+    kwargs = {phase: split_kwargs(cfg, phase, seed) for phase in ("train", "eval")}
+    envs = {phase: ChargingNavEnv(**kwargs[phase]) for phase in ("train", "eval")}
     # validates every environment value; loads the scenario; no SUMO yet
     rules: dict[str, Any] = {}
     if settings.validation.every and dispatcher_learns(name):
-        envs["validation"] = ChargingNavEnv(**split_kwargs(cfg, "tuning", seed))
+        kwargs["validation"] = split_kwargs(cfg, "tuning", seed)
+        envs["validation"] = ChargingNavEnv(**kwargs["validation"])
         rules = {str(r): make_dispatcher(str(check_rule(r, "train.validation.rules")), envs["validation"],
                                          baseline_rng(seed)) for r in cfg.train.validation.rules}  # fmt: skip
     agent = make_dispatcher(name, envs["train"], agent_rng(settings.seed), **params)
@@ -136,7 +140,8 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         check_rule(rule, "eval.baselines")
         baselines[str(rule)] = make_dispatcher(str(rule), envs["eval"], baseline_rng(settings.seed))
     return {"settings": settings, "agent": agent, "baselines": baselines, "envs": envs, "rules": rules,
-            "runner": lambda phase: make_runner(envs[phase], engine, batch)}  # fmt: skip
+            "runner": lambda phase: make_runner(envs[phase], engine, batch),
+            "recipe": RunnerRecipe(kwargs, engine, batch)}  # fmt: skip
 
 
 def check_learning_starts(agent: Any, episodes: int, env_config: Any) -> None:
@@ -243,10 +248,21 @@ def train(cfg: DictConfig) -> float:
         config=OmegaConf.to_container(cfg, resolve=True),
         validation_rules=parts["rules"],
         on_start=lambda: write_run_record(out_dir, cfg),  # once the run directory passed its checks
+        beside=_beside(parts),
     )
     for line in (fleet_report_lines if fleet else report_lines)(result, cfg.evs):
         log.info("%s", line)
     return TASKS[result.evaluation.task].score(result.evaluation.summary)
+
+
+def _beside(parts: dict[str, Any]) -> RunnerRecipe | None:
+    """The runners of a second process that plays a learner's rules while it trains (evcd.loops.beside),
+    where a core is free and the rules play enough episodes to pay for starting it."""
+    recipe = parts.get("recipe")
+    if recipe is None or available_cores() < 2:
+        return None
+    enough = rule_episodes(parts["settings"], parts["rules"], parts["baselines"]) >= MIN_EPISODES
+    return recipe if enough else None
 
 
 def report_lines(result: Any, evs: int) -> list[str]:

@@ -69,7 +69,7 @@ def build_days(config: EnvConfig, days: Sequence[int], workers: int) -> dict[int
                 day = todo.pop(0)
                 out = open(Path(tmp) / f"day{day}.log", "w+b")  # noqa: SIM115  (closed when it ends)
                 command = [sys.executable, "-m", "evcd.env.day_builds", str(recipe), str(day)]
-                process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, env=_child_env())
+                process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, env=child_env())
                 running.append((day, process, out, time.perf_counter()))
             time.sleep(0.2)
             for entry in [e for e in running if e[1].poll() is not None]:
@@ -92,7 +92,7 @@ def build_days(config: EnvConfig, days: Sequence[int], workers: int) -> dict[int
     return {d: walls[d] for d in days}
 
 
-def _child_env() -> dict[str, str]:
+def child_env() -> dict[str, str]:
     """This process's environment, the folder that holds this evcd first on the import path (so that
     a child finds the same evcd, installed or a checkout run in place)."""
     home = str(Path(__file__).resolve().parents[2])

@@ -22,6 +22,8 @@ fleet run, where every guided EV's transitions reach the one shared learner.
    state, an interrupted and resumed run ends with the same weights as an uninterrupted one.
 2. **Validation** (every ``validation.every`` episodes and at the end: :mod:`evcd.loops.validation`):
    the policy without exploration on fixed episodes of the tuning days, the rules once beside it.
+   With ``beside``, a learner's rules (the validation's and the baselines) are played in a second
+   process while it trains (:mod:`evcd.loops.beside`).
 3. **Evaluation**: the agent (with ``validation.select_best``, the policy of its best validation:
    :mod:`evcd.loops.best_policy`), without exploration, on the evaluation episodes (stream
    :data:`~evcd.loops.seeds.EVAL_STREAM`, the same episodes ``scripts/evaluate.py`` runs for that
@@ -48,6 +50,7 @@ from typing import Any
 
 from evcd.agents.base import Agent
 from evcd.env.runners.base import EpisodeRunner, EpisodeSpec
+from evcd.loops.beside import RulesBeside
 from evcd.loops.best_policy import check_learned, keep_if_best, policy_to_evaluate
 from evcd.loops.curves import plot_learning_curve
 from evcd.loops.evaluate import Dispatcher, evaluate
@@ -214,6 +217,7 @@ def train_and_evaluate(
     config: Mapping[str, Any] | None = None,
     validation_rules: Mapping[str, Agent] | None = None,
     on_start: Callable[[], None] | None = None,
+    beside: RunnerFactory | None = None,
 ) -> TrainResult:
     """Train ``agent`` (if it learns), evaluate it and the ``baselines`` on the same held-out episodes,
     on either task: the runners' (:attr:`~evcd.env.runners.base.EpisodeRunner.task`; the fleet's
@@ -232,6 +236,9 @@ def train_and_evaluate(
         validation_rules: the rules validated on the periodic validation's episodes beside the agent
             (``settings.validation``; ``runners("validation")`` makes its runner).
         on_start: called once ``run_dir`` passed every check, before anything is written into it.
+        beside: a picklable ``runners`` (e.g. :class:`~evcd.loops.beside.RunnerRecipe`): a learner's
+            validation rules and baselines are played in a second process while it trains
+            (:mod:`evcd.loops.beside`: the same rows, on a core that would idle); ``None``: in turn here.
 
     Raises:
         FileExistsError, FileNotFoundError: see :func:`check_run_dir`.
@@ -243,21 +250,26 @@ def train_and_evaluate(
     task = task_of(runner)
     state, tlog = start_run(run_dir, agent, resume, config, task.state, on_start)
     episodes = settings.episodes if agent.learns else 0
+    side: RulesBeside | None = None
     try:
         if episodes and state.episodes_done < episodes:
             validator = None
+            rules = (validation_rules or {}) if settings.validation.every else {}
+            to_play = {n: r for n, r in rules.items() if n not in state.validation.rules}
+            if beside is not None and (to_play or baselines):
+                side = RulesBeside(beside, settings, to_play, baselines or {})
             if settings.validation.every:
-                rules = validation_rules or {}
 
                 def specs(played: EpisodeRunner) -> list[EpisodeSpec]:
                     return task.specs(settings.seed, settings.validation.episodes, played, VALIDATION_STREAM)
 
-                validator = Validator(runners, settings.validation, rules, specs)
+                validator = Validator(runners, settings.validation, rules, specs,
+                                      side.validation_rules if side is not None else None)  # fmt: skip
             train_episodes(agent, lambda: runners("train"), training_specs(settings), settings, run_dir,
                            state, config, tlog, validator)  # fmt: skip
         check_learned(agent, episodes)
         selected = policy_to_evaluate(run_dir, agent, settings.validation, state.validation, episodes)
-        evaluation, bases = _evaluate(agent, runner, settings, baselines or {})
+        evaluation, bases = _evaluate(agent, runner, settings, baselines or {}, side)
         paired = {name: task.paired(evaluation.rows, base.rows, settings.seed, settings.resamples)
                   for name, base in bases.items()}  # fmt: skip
         learner = agent if isinstance(agent, Agent) and agent.learns else None
@@ -269,18 +281,26 @@ def train_and_evaluate(
                      {n: task.score_pair(p) for n, p in paired.items()}, state.transitions)  # fmt: skip
     finally:
         tlog.close()
+        if side is not None:
+            side.close()
     result = TrainResult(evaluation, bases, paired, training)
     _write_outputs(run_dir, task, result, state, config, runner)
     return result
 
 
 def _evaluate(
-    agent: Dispatcher, runner: EpisodeRunner, settings: TrainSettings, baselines: Mapping[str, Dispatcher]
+    agent: Dispatcher,
+    runner: EpisodeRunner,
+    settings: TrainSettings,
+    baselines: Mapping[str, Dispatcher],
+    side: RulesBeside | None = None,
 ) -> tuple[EvalResult, dict[str, EvalResult]]:
     try:
         runner.prepare()
         kwargs = {"progress": settings.progress, "resamples": settings.resamples}
         evaluation = evaluate(runner, agent, settings.eval_episodes, settings.seed, **kwargs)
+        if side is not None:  # played beside the training
+            return evaluation, dict(side.baselines())
         bases = {}
         for name, baseline in baselines.items():
             same = baseline.name == agent.name and not agent.learns

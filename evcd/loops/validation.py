@@ -131,7 +131,8 @@ def _json(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def _travel_times(rows: Sequence[Any]) -> list[float]:
+def travel_times(rows: Sequence[Any]) -> list[float]:
+    """The validation values of ``rows``: each row's ``travel_time``, NaN where it is ``truncated``."""
     return [math.nan if r.truncated else float(r.travel_time) for r in rows]
 
 
@@ -145,6 +146,9 @@ class Validator:
         rules: the rules validated once on the same episodes, by name.
         specs: ``specs(runner)`` -> the validation episodes (the same at every validation; the run's
             task says which: :meth:`evcd.loops.tasks.Task.specs` of the validation stream).
+        played: ``played()`` -> rules' values played elsewhere on the same episodes (by name; a second
+            process: :mod:`evcd.loops.beside`), asked for at the first validation; those rules are not
+            played here.
 
     A validation value is a row's ``travel_time`` (NaN where it is ``truncated``): the target's travel
     time, or a fleet episode's guided EVs' mean.
@@ -156,11 +160,13 @@ class Validator:
         settings: ValidationSettings,
         rules: Mapping[str, Agent],
         specs: Callable[[EpisodeRunner], list[EpisodeSpec]],
+        played: Callable[[], Mapping[str, list[float]]] | None = None,
     ) -> None:
         self.runners = runners
         self.settings = settings
         self.rules = dict(rules)
         self.specs = specs
+        self.played = played
 
     def due(self, episodes_done: int, total: int) -> bool:
         """Whether a validation follows ``episodes_done`` training episodes (and always the last)."""
@@ -168,17 +174,20 @@ class Validator:
 
     def validate(self, agent: Agent, episodes_done: int, transitions: int, record: ValidationRecord) -> None:
         """Play the validation episodes with ``agent`` (and, the first time, the rules); add a point."""
+        if self.played is not None and any(name not in record.rules for name in self.rules):
+            for name, values in self.played().items():
+                record.rules.setdefault(name, list(values))
         runner = self.runners("validation")
         specs = self.specs(runner)
         try:
             runner.prepare()
             for name, rule in self.rules.items():
                 if name not in record.rules:
-                    record.rules[name] = _travel_times(runner.run(specs, rule))
+                    record.rules[name] = travel_times(runner.run(specs, rule))
             rows = runner.run(specs, agent)
         finally:
             runner.close()
-        point = ValidationPoint(episodes_done, transitions, _travel_times(rows))
+        point = ValidationPoint(episodes_done, transitions, travel_times(rows))
         record.points.append(point)
         rules = ", ".join(f"{n} {finite_mean(t):.1f} s" for n, t in record.rules.items())
         log.info("validation after %d episodes: %.1f s over %d episodes (%s)", episodes_done, point.mean,

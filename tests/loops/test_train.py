@@ -8,6 +8,7 @@ through ``scripts/train.py`` on a real SUMO scenario.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import re
 import subprocess
@@ -457,3 +458,40 @@ def test_several_training_days_are_played_in_turn_one_call_each():
     assert all(s.options["day"] == specs[10 * (i // 10)].options["day"] for i, s in enumerate(specs))
     plain = training_specs(settings(episodes=50, checkpoint_every=10))
     assert [s.reset_seed for s in specs] == [s.reset_seed for s in plain] and plain[0].options is None
+
+
+@pytest.mark.slow
+def test_rules_played_beside_the_training_give_the_same_run(validated, tmp_path):
+    """The validation's rules and the baselines played in a second process: the same validation,
+    evaluation and comparison as the run that played them in turn."""
+    torch.set_num_threads(1)
+    run_dir, _agent, result = validated
+    rules = {"greedy": greedy(), "queue_aware": queue_aware()}
+    beside = train_and_evaluate(learner(), toy_runners, validated_settings(), tmp_path / "beside",
+                                baselines=BASELINES(), config=CONFIG, validation_rules=rules,
+                                beside=toy_runners)  # fmt: skip
+    dirs = (run_dir, tmp_path / "beside")
+    same, other = (_timeless(json.loads((d / RESULTS_JSON).read_text())) for d in dirs)
+    assert other["validation"] == same["validation"] and other["baselines"] == same["baselines"]
+    assert other["summary"] == same["summary"]
+    assert [dataclasses.replace(r, wall_s=0.0) for r in beside.baselines["greedy"].rows] == [
+        dataclasses.replace(r, wall_s=0.0) for r in result.baselines["greedy"].rows
+    ]
+    assert beside.paired == result.paired
+
+
+def test_a_failure_beside_the_training_is_reported(tmp_path):
+    with pytest.raises(RuntimeError, match="the process playing the rules beside the training failed"):
+        train_and_evaluate(learner(), toy_runners, settings(episodes=10), tmp_path / "run",
+                           baselines=BASELINES(), beside=_no_runner)  # fmt: skip
+
+
+def _timeless(data):
+    """``data`` without its wall times."""
+    if isinstance(data, dict):
+        return {k: _timeless(v) for k, v in data.items() if "wall" not in k}
+    return [_timeless(v) for v in data] if isinstance(data, list) else data
+
+
+def _no_runner(phase: str):
+    raise ValueError(f"no runner for {phase}")
