@@ -8,7 +8,8 @@ with a core to spare the trainer hands them to a second process when training st
 rules' time is gone from the run's wall time. libsumo runs one simulation per process: hence a
 process (``python -m evcd.loops.beside``, as a day build's: it works under any launcher, Hydra's
 joblib workers included), which makes its own runners from a picklable factory
-(:class:`RunnerRecipe`) and hands each result back as a file.
+(:class:`RunnerRecipe`) and hands each result back as a file. A trainer killed before it closes the
+process leaves nothing behind: the process ends within a second and removes its files.
 
     beside = RulesBeside(RunnerRecipe(kwargs_by_phase, "batched", 25), settings, rules, baselines)
     ...
@@ -19,10 +20,13 @@ joblib workers included), which makes its own runners from a picklable factory
 
 from __future__ import annotations
 
+import os
 import pickle
+import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
@@ -110,7 +114,7 @@ class RulesBeside:
         job = self.out / "job.pickle"
         job.write_bytes(pickle.dumps((recipe, settings, dict(rules), dict(baselines))))
         self._log = open(self.out / "output.log", "w+b")  # noqa: SIM115  (closed by close())
-        command = [sys.executable, "-m", "evcd.loops.beside", str(job), str(self.out)]
+        command = [sys.executable, "-m", "evcd.loops.beside", str(job), str(self.out), str(os.getpid())]
         self._process = subprocess.Popen(command, stdout=self._log, stderr=subprocess.STDOUT, env=child_env())
         self._got: dict[str, Any] = {}
 
@@ -146,15 +150,33 @@ class RulesBeside:
         self._dir.cleanup()
 
 
+def _orphaned(parent: int, out: Path) -> bool:
+    """Whether the trainer that started this process is gone (then its folder ``out`` is removed)."""
+    if os.getppid() == parent:
+        return False
+    shutil.rmtree(out, ignore_errors=True)
+    return True
+
+
+def _watch(parent: int, out: Path) -> None:
+    """End this process (and remove ``out``) soon after its trainer ends without closing it: killed."""
+    while not _orphaned(parent, out):
+        time.sleep(1.0)
+    os._exit(1)
+
+
 def main(argv: Sequence[str]) -> int:
-    """``python -m evcd.loops.beside JOB_PICKLE OUT_DIR``: what :class:`RulesBeside` runs."""
-    job, out = Path(argv[0]), Path(argv[1])
+    """``python -m evcd.loops.beside JOB_PICKLE OUT_DIR TRAINER_PID``: what :class:`RulesBeside` runs."""
+    job, out, parent = Path(argv[0]), Path(argv[1]), int(argv[2])
+    threading.Thread(target=_watch, args=(parent, out), daemon=True).start()
     try:
         recipe, settings, rules, baselines = pickle.loads(job.read_bytes())
         _play(recipe, settings, rules, baselines, out)
     except BaseException:  # anything: the trainer reports the end of this output
         traceback.print_exc()
         return 1
+    finally:
+        _orphaned(parent, out)
     return 0
 
 

@@ -4,6 +4,11 @@ play in turn, and a second process that fails is reported."""
 from __future__ import annotations
 
 import dataclasses
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -59,3 +64,38 @@ def test_a_second_process_that_fails_is_named_with_its_output(tmp_path):
 
 def _no_runner(phase: str):
     raise ValueError(f"no runner for {phase}")
+
+
+def _slow_runner(phase: str):
+    time.sleep(120)
+
+
+TRAINER = """
+import sys, time
+from evcd.loops.beside import RulesBeside
+from tests.loops.test_beside import SETTINGS, _slow_runner
+side = RulesBeside(_slow_runner, SETTINGS, {"greedy": None}, {})
+print(side.out, side._process.pid, flush=True)
+time.sleep(120)
+"""
+
+
+def test_a_killed_trainer_leaves_no_process_and_no_files_behind():
+    trainer = subprocess.Popen([sys.executable, "-c", TRAINER], stdout=subprocess.PIPE, text=True,
+                               cwd=Path(__file__).resolve().parents[2])  # fmt: skip
+    out, pid = trainer.stdout.readline().split()
+    assert Path(out).is_dir()
+    trainer.kill()
+    trainer.wait()
+    deadline = time.monotonic() + 20
+    while (Path(out).exists() or _alive(int(pid))) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not Path(out).exists() and not _alive(int(pid))
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f"/proc/{pid}").exists() and "Z" not in Path(f"/proc/{pid}/stat").read_text().split()[2]
