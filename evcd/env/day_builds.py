@@ -25,6 +25,7 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import IO
 
 from evcd.env.config import EnvConfig
 from evcd.sim.snapshots import DayCache
@@ -76,8 +77,7 @@ def build_days(config: EnvConfig, days: Sequence[int], workers: int) -> dict[int
                 running.remove(entry)
                 day, process, out, started = entry
                 walls[day] = time.perf_counter() - started
-                out.seek(0)
-                tail = out.read().decode(errors="replace").splitlines()[-TAIL_LINES:]
+                tail = output_tail(out)
                 out.close()
                 if process.returncode != 0:
                     for _, other, other_out, _ in running:
@@ -90,6 +90,12 @@ def build_days(config: EnvConfig, days: Sequence[int], workers: int) -> dict[int
     log.info("built %d background days %d at a time in %.1f s (%s)", len(days), workers,
              time.perf_counter() - t0, each)  # fmt: skip
     return {d: walls[d] for d in days}
+
+
+def output_tail(out: IO[bytes]) -> list[str]:
+    """The last :data:`TAIL_LINES` lines a child process wrote to ``out`` (its open log file)."""
+    out.seek(0)
+    return out.read().decode(errors="replace").splitlines()[-TAIL_LINES:]
 
 
 def child_env() -> dict[str, str]:

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from evcd.env import ChargingNavEnv
-from evcd.env.day_builds import TAIL_LINES, child_env
+from evcd.env.day_builds import child_env, output_tail
 from evcd.env.runners import EpisodeRunner, make_runner
 from evcd.loops.evaluate import Dispatcher, evaluate
 from evcd.loops.seeds import VALIDATION_STREAM
@@ -124,8 +124,7 @@ class RulesBeside:
             if path.is_file():
                 self._got[what] = pickle.loads(path.read_bytes())
             elif self._process.poll() is not None and not path.is_file():
-                self._log.seek(0)
-                tail = self._log.read().decode(errors="replace").splitlines()[-TAIL_LINES:]
+                tail = output_tail(self._log)
                 code = self._process.returncode
                 raise RuntimeError(f"the process playing the rules beside the training failed (exit {code}) "
                                    f"before its {what}:\n" + "\n".join(tail))  # fmt: skip
