@@ -11,6 +11,7 @@ The refusals run in one process (:func:`run_refusals`). Every shipped page's job
 from __future__ import annotations
 
 import importlib.util
+import itertools
 import json
 import shutil
 from pathlib import Path
@@ -31,7 +32,7 @@ from evcd.report.reproduce.check import (
 from evcd.report.reproduce.check import tables as md_tables
 from evcd.report.reproduce.found import job_groups
 from evcd.report.reproduce.launch import check_launcher
-from evcd.report.reproduce.spec import PageError, PageJob, known_pages, load_page
+from evcd.report.reproduce.spec import PageError, PageJob, job_key, known_pages, load_page
 from evcd.report.sweep import world_label
 from tests.conftest import CONF, ROOT, SCRIPTS, run_refusals, run_script, shared_folder
 
@@ -346,6 +347,18 @@ def test_missing_jobs_are_grouped_into_the_fewest_multiruns():
     assert "agent=dueling_ddqn,dqn,hindsight,queue_aware,greedy,random" in overrides
     odd = [jobs[0], jobs[-1]]
     assert [g[1] for g in job_groups(odd)] == [j.overrides for j in odd]
+    # a sweep stopped after its first four jobs resumes as three multiruns, not 86 one after another
+    groups = job_groups(jobs[4:])
+    assert [n for _, _, n in groups] == [2, 9, 75]
+    assert "seed=1" in groups[0][1] and "evs=300,400" in groups[0][1]
+    assert "seed=2,3,4" in groups[1][1] and "agent=dqn,hindsight,queue_aware,greedy,random" in groups[2][1]
+    covered = [
+        job_key(combo)
+        for _, overrides, _ in groups
+        for combo in itertools.product(*([f"{k}={v}" for v in vs.split(",")]
+                                         for k, vs in (o.split("=") for o in overrides)))
+    ]  # fmt: skip
+    assert len(covered) == 86 and set(covered) == {j.key for j in jobs[4:]}
     assert isinstance(jobs[0], PageJob) and sweep.name == "table"
 
 

@@ -204,28 +204,44 @@ def find_jobs(page: Page, folders: Sequence[Path], extra: Sequence[str] = ()) ->
     return Found(page, finished, tuple(gaps), len(jobs), results)
 
 
+def _products(combos: Sequence[tuple[str, ...]]) -> list[list[list[str]]]:
+    """Split ``combos`` (each a tuple of values, one per axis, all the same length) into products of
+    values, each given as the values of every axis: along the first axis, the values whose jobs on the
+    other axes are the same share one product, and those jobs split the same way in turn."""
+    if not combos or not combos[0]:
+        return [[]] if combos else []
+    rests: dict[str, list[tuple[str, ...]]] = {}
+    for combo in combos:
+        rests.setdefault(combo[0], []).append(combo[1:])
+    shared: dict[frozenset[tuple[str, ...]], list[str]] = {}
+    for value, rest in rests.items():
+        shared.setdefault(frozenset(rest), []).append(value)
+    out: list[list[list[str]]] = []
+    for values in shared.values():
+        out += [[values, *part] for part in _products(rests[values[0]])]
+    return out
+
+
 def job_groups(jobs: Sequence[PageJob]) -> list[tuple[Sweep, tuple[str, ...], int]]:
-    """Multiruns that run exactly ``jobs``, as (sweep, overrides, jobs): per sweep, one multirun where
-    the jobs form a product of values (``agent=dqn,greedy seed=3``), else one multirun per job."""
+    """Multiruns that run exactly ``jobs``, as (sweep, overrides, jobs): per sweep, the fewest products
+    of values found axis by axis (``agent=dqn,greedy seed=3``; the jobs left of a sweep whose first
+    jobs finished are one multirun of the rest of the first agent and one of the other agents), each
+    job in exactly one, in the sweep's order; a job whose overrides name other axes runs alone."""
     by_sweep: dict[str, list[PageJob]] = defaultdict(list)
     for job in jobs:
         by_sweep[job.sweep.name].append(job)
     out: list[tuple[Sweep, tuple[str, ...], int]] = []
     for group in by_sweep.values():
         sweep = group[0].sweep
-        axes: dict[str, list[str]] = {}
-        for job in group:
-            for override in job.overrides:
-                key, _, value = override.partition("=")
-                if value not in axes.setdefault(key, []):
-                    axes[key].append(value)
-        product = 1
-        for values in axes.values():
-            product *= len(values)
-        if product == len(group) and all(len(j.overrides) == len(axes) for j in group):
-            out.append((sweep, tuple(f"{k}={','.join(v)}" for k, v in axes.items()), len(group)))
-        else:
-            out += [(sweep, job.overrides, 1) for job in group]
+        keys = [o.partition("=")[0] for o in group[0].overrides]
+        alike = [j for j in group if [o.partition("=")[0] for o in j.overrides] == keys]
+        combos = [tuple(o.partition("=")[2] for o in j.overrides) for j in alike]
+        for values in _products(combos):
+            n = 1
+            for axis in values:
+                n *= len(axis)
+            out.append((sweep, tuple(f"{k}={','.join(v)}" for k, v in zip(keys, values, strict=True)), n))
+        out += [(sweep, job.overrides, 1) for job in group if job not in alike]
     return out
 
 
