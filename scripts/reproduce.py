@@ -18,6 +18,9 @@ the jobs' wall times). ``--check DIR...`` runs nothing: it renders from finished
 page's jobs matched by their overrides, wherever they ran). Either way the rendering is then compared
 with the committed data, cell by cell (:mod:`evcd.report.reproduce.check`).
 
+Stopped (Ctrl-C, or SIGTERM), it stops the sweep running with every process it started, and the same
+command with the same ``--out`` resumes it.
+
 Exit codes: 0 rendered, and equal to the committed data; 1 rendered, and different (each difference
 listed); 2 bad input (an unknown page, a run directory of another task or experiment, a launcher whose
 plugin is not installed, an output folder that exists and is not this page's), or jobs that did not
@@ -29,6 +32,7 @@ from __future__ import annotations
 import argparse
 import logging
 import shlex
+import signal
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -136,5 +140,12 @@ def main(argv: list[str] | None = None) -> int:
     return 1 if differences else 0
 
 
+def _terminated(signum: int, _frame: object) -> None:
+    """SIGTERM (``kill``, a cluster's time limit) ends the run as Ctrl-C does: the sweep running is
+    stopped with its whole process group (:func:`evcd.report.reproduce.launch.run_group`)."""
+    raise SystemExit(128 + signum)
+
+
 if __name__ == "__main__":
+    signal.signal(signal.SIGTERM, _terminated)
     sys.exit(main())

@@ -10,10 +10,15 @@ The refusals run in one process (:func:`run_refusals`). Every shipped page's job
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import itertools
 import json
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -164,6 +169,46 @@ def test_a_reproduction_resumes_only_the_jobs_left(reproduced, tmp_path):
     assert "seed=1" in launches[2]["command"] and "seed=0,1" not in launches[2]["command"]
     assert kept.read_bytes() == before and (out / "sweeps" / "greedy-resume1" / "multirun.yaml").is_file()
     assert "sweep 1/1 greedy: 1 job(s)" in proc.stderr
+
+
+def _sessions() -> dict[int, int]:
+    """Every live process of this machine: pid -> session id (zombies left out)."""
+    out = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError):
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                if fields[0] != "Z":
+                    out[int(entry.name)] = int(fields[3])
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the processes from /proc")
+def test_a_stopped_reproduction_ends_every_process_it_started(script_overrides, tmp_path):
+    # its own day cache: the stop may come while the first job builds its day
+    overrides = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
+    page = tmp_path / "page.yaml"
+    page.write_text(yaml.safe_dump(tiny_page([*overrides, f"env.cache_dir={tmp_path / 'cache'}"])))
+    out = tmp_path / "out"
+    cmd = [str(c) for c in (sys.executable, SCRIPTS / "reproduce.py", page, "--out", out, "--root", tmp_path)]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    sweep = f"hydra.sweep.dir={out / 'sweeps' / 'greedy'}"
+    deadline, group = time.monotonic() + 120, None
+    while group is None and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+        for pid in _sessions():
+            with contextlib.suppress(OSError):
+                if sweep in Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0"):
+                    group = pid
+    assert group is not None and proc.poll() is None, "the first sweep never started"
+    time.sleep(2)  # its job under way
+    proc.send_signal(signal.SIGTERM)
+    log, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, log[-3000:]
+    assert f"stopped: ending the sweep running (process group {group})" in log
+    assert group not in _sessions().values()  # nothing of the sweep left running
+    assert not (out / "rendered").exists()
 
 
 @pytest.mark.slow

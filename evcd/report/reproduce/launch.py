@@ -15,16 +15,19 @@ touched).
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import json
 import logging
+import os
+import signal
 import subprocess
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from evcd.report.reproduce.found import job_groups, read_run_dir, run_dirs
 from evcd.report.reproduce.spec import Page, PageError, PageJob, Sweep, display, job_key
@@ -141,6 +144,39 @@ def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[tuple[
     return plan
 
 
+def run_group(cmd: Sequence[str], output: IO[str], cwd: Path, grace_s: float = 10.0) -> int:
+    """Run ``cmd`` in a process group of its own, its output to ``output``; its exit code. If this process
+    is stopped while it runs (an exception here, such as ``KeyboardInterrupt`` or the ``SystemExit`` of
+    a SIGTERM handler), the whole group goes with it: the multirun, its launcher's workers, the jobs'
+    day builds and second processes, none left playing on into the run's folder (SIGTERM, then SIGKILL
+    after ``grace_s``)."""
+    process = subprocess.Popen(cmd, stdout=output, stderr=subprocess.STDOUT, cwd=cwd, start_new_session=True)
+    try:
+        return process.wait()
+    except BaseException:
+        log.warning(
+            "stopped: ending the sweep running (process group %d) and every process it started; "
+            "the same command resumes it",
+            process.pid,
+        )
+        stop_group(process, grace_s)
+        raise
+
+
+def stop_group(process: subprocess.Popen[Any], grace_s: float) -> None:
+    """Send SIGTERM to the process group ``process`` leads, SIGKILL to what is left of it after
+    ``grace_s`` (``process`` itself reaped)."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(process.pid, signal.SIGTERM)
+        deadline = time.monotonic() + grace_s
+        while time.monotonic() < deadline:
+            process.poll()
+            os.killpg(process.pid, 0)  # ProcessLookupError once the whole group has gone
+            time.sleep(0.1)
+        os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+
+
 def run_sweeps(
     page: Page,
     out: Path,
@@ -169,9 +205,7 @@ def run_sweeps(
         started, t0 = datetime.now().isoformat(timespec="seconds"), time.perf_counter()
         with open(logfile, "a") as f:
             cmd = [python, str(Path(scripts_dir) / sweep.script), *argv]
-            code = subprocess.run(
-                cmd, stdout=f, stderr=subprocess.STDOUT, cwd=Path(scripts_dir).parent
-            ).returncode
+            code = run_group(cmd, f, Path(scripts_dir).parent)
         wall = time.perf_counter() - t0
         launch = {"sweep": sweep.name, "dir": str(sweep_dir), "command": display(sweep.script, argv),
                   "jobs": jobs, "started": started, "wall_s": round(wall, 1), "returncode": code}  # fmt: skip
