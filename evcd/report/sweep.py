@@ -7,7 +7,8 @@ The sweep's ``multirun.yaml`` names its overrides (``hydra.overrides.task``); th
 (Hydra's own override parser and sweep iteration, :func:`expand_sweep`) is the set of jobs expected.
 Each job subdirectory is matched to its combination through its ``.hydra/overrides.yaml``. A combination
 without a subdirectory is *missing*, a subdirectory without a readable ``results.json`` has *failed*
-(:class:`JobGap`, with the last error of the job's log); either stops :func:`collect`
+(:class:`JobGap`, with the last error of the job's log, or, where its log has none, as a job stopped
+or still running); either stops :func:`collect`
 (:class:`IncompleteSweepError`) unless ``allow_incomplete``. A plain run directory (``results.json``
 and ``.hydra/``) counts as a sweep of one job.
 """
@@ -311,7 +312,8 @@ def read_job(job_dir: Path, overrides: Sequence[str] = (), parse: Parser = job_r
     ``"failed"`` :class:`JobGap` if ``results.json`` is absent or unreadable."""
     path = job_dir / RESULTS_JSON
     if not path.is_file():
-        reason = "; ".join(r for r in (f"no {RESULTS_JSON}", _log_reason(job_dir)) if r)
+        error = _log_reason(job_dir) or "no error in its log: stopped, or still running"
+        reason = f"no {RESULTS_JSON}; {error}"
         return JobGap("failed", tuple(overrides), job_dir, reason)
     try:
         return parse(json.loads(path.read_text()), job_dir)

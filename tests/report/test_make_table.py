@@ -354,6 +354,14 @@ def test_an_error_line_of_the_log_names_a_failed_job(sweep):
         collect([sweep])
 
 
+def test_a_job_without_results_or_error_may_still_be_running(sweep):
+    running = job_dir(sweep, "random", 200, 0)
+    (running / "results.json").unlink()
+    with pytest.raises(IncompleteSweepError) as info:
+        collect([sweep])
+    assert f"in {running}: no results.json; no error in its log: stopped, or still running" in str(info.value)
+
+
 def test_duplicate_jobs_and_non_run_directories_are_refused(sweep, tmp_path):
     with pytest.raises(ResultsError, match="same \\(regime, agent, evs, seed\\)"):
         collect([sweep, job_dir(sweep, "dqn", 200, 0)])
