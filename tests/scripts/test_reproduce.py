@@ -14,6 +14,7 @@ import contextlib
 import importlib.util
 import itertools
 import json
+import re
 import shutil
 import signal
 import subprocess
@@ -86,6 +87,11 @@ def reproduced(script_overrides, tmp_path_factory) -> Path:
         log = proc.stdout + proc.stderr
         assert proc.returncode == 1, log[-3000:]  # rendered; nothing committed yet to compare with
         assert "committed/results.csv: no such committed file" in log
+        # each job named as it finishes, the time the others take at that pace
+        assert "sweep 1/2 greedy: 1 of 2 jobs finished (0_greedy_evs30_seed0) after " in log
+        first = r"sweep 2/2 queue: 1 of 2 jobs finished \(\d_queue_aware_evs30_seed\d\) after \d+ s; "
+        assert re.search(first + r"about \d+ s left at this pace", log)
+        assert "sweep 2/2 queue: 2 of 2 jobs finished" in log
         rendered, committed = folder / "out" / "rendered", folder / "root" / "committed"
         committed.mkdir()
         shutil.copy(rendered / "table" / "results.csv", committed / "results.csv")

@@ -8,7 +8,8 @@ overrides pass through: ``hydra/launcher=joblib hydra.launcher.n_jobs=2`` runs t
 ``hydra/launcher=evcd_slurm`` submits the same jobs to a SLURM cluster (:func:`check_launcher` names
 the extra a missing plugin needs before anything starts). Each sweep goes to ``<out>/sweeps/<name>``,
 its output to ``<out>/logs/<name>.log``; ``<out>/reproduce.json`` records the page, the overrides and
-every launch with its command, wall time and exit code. Run again with the same ``--out``, a page
+every launch with its command, wall time and exit code; the log names each job as it finishes, with
+the time the multirun's other jobs take at its pace so far. Run again with the same ``--out``, a page
 runs only the jobs that have not finished (into ``<name>-resume<k>``; nothing already written is
 touched).
 """
@@ -29,6 +30,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import IO, Any
 
+from evcd.loops.run_files import RESULTS_JSON
 from evcd.report.reproduce.found import job_groups, read_run_dir, run_dirs
 from evcd.report.reproduce.spec import Page, PageError, PageJob, Sweep, display, job_key
 from evcd.utils.atomic import atomic_write_text
@@ -144,15 +146,65 @@ def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[tuple[
     return plan
 
 
-def run_group(cmd: Sequence[str], output: IO[str], cwd: Path, grace_s: float = 10.0) -> int:
-    """Run ``cmd`` in a process group of its own, its output to ``output``; its exit code. If this process
-    is stopped while it runs (an exception here, such as ``KeyboardInterrupt`` or the ``SystemExit`` of
-    a SIGTERM handler), the whole group goes with it: the multirun, its launcher's workers, the jobs'
-    day builds and second processes, none left playing on into the run's folder (SIGTERM, then SIGKILL
-    after ``grace_s``)."""
+class FinishedJobs:
+    """Called while a multirun runs: logs each of its jobs as its ``results.json`` appears, with how
+    many are left and, at the pace so far, about how long they take (a page runs for hours).
+
+    Args:
+        sweep_dir: the multirun's folder.
+        label: how the log names the multirun (``sweep 1/3 table``).
+        total: its jobs.
+    """
+
+    def __init__(self, sweep_dir: Path, label: str, total: int) -> None:
+        self.sweep_dir, self.label, self.total = Path(sweep_dir), label, total
+        self.started = time.monotonic()
+        self.seen: set[str] = set()
+
+    def __call__(self) -> None:
+        """Log the jobs that finished since the last call."""
+        for path in sorted(self.sweep_dir.glob(f"*/{RESULTS_JSON}"), key=lambda p: p.stat().st_mtime):
+            if path.parent.name in self.seen:
+                continue
+            self.seen.add(path.parent.name)
+            done, elapsed = len(self.seen), time.monotonic() - self.started
+            left = max(self.total - done, 0)
+            pace = f"; about {_duration(elapsed / done * left)} left at this pace" if left else ""
+            log.info("%s: %d of %d jobs finished (%s) after %s%s", self.label, done, self.total,
+                     path.parent.name, _duration(elapsed), pace)  # fmt: skip
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``17 min`` or ``3.2 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
+
+
+def run_group(
+    cmd: Sequence[str],
+    output: IO[str],
+    cwd: Path,
+    grace_s: float = 10.0,
+    watch: Callable[[], None] | None = None,
+    every_s: float = 10.0,
+) -> int:
+    """Run ``cmd`` in a process group of its own, its output to ``output``; its exit code. ``watch`` is
+    called every ``every_s`` while it runs and once after. If this process is stopped while it runs
+    (an exception here, such as ``KeyboardInterrupt`` or the ``SystemExit`` of a SIGTERM handler), the
+    whole group goes with it: the multirun, its launcher's workers, the jobs' day builds and second
+    processes, none left playing on into the run's folder (SIGTERM, then SIGKILL after ``grace_s``)."""
     process = subprocess.Popen(cmd, stdout=output, stderr=subprocess.STDOUT, cwd=cwd, start_new_session=True)
     try:
-        return process.wait()
+        while True:
+            try:
+                code = process.wait(timeout=every_s if watch else None)
+                break
+            except subprocess.TimeoutExpired:
+                watch()  # type: ignore[misc]
+        if watch:
+            watch()
+        return code
     except BaseException:
         log.warning(
             "stopped: ending the sweep running (process group %d) and every process it started; "
@@ -203,9 +255,10 @@ def run_sweeps(
             "sweep %d/%d %s: %d job(s) -> %s (output: %s)", i, len(plan), sweep.name, jobs, sweep_dir, logfile
         )
         started, t0 = datetime.now().isoformat(timespec="seconds"), time.perf_counter()
+        watch = FinishedJobs(sweep_dir, f"sweep {i}/{len(plan)} {sweep.name}", jobs)
         with open(logfile, "a") as f:
             cmd = [python, str(Path(scripts_dir) / sweep.script), *argv]
-            code = run_group(cmd, f, Path(scripts_dir).parent)
+            code = run_group(cmd, f, Path(scripts_dir).parent, watch=watch)
         wall = time.perf_counter() - t0
         launch = {"sweep": sweep.name, "dir": str(sweep_dir), "command": display(sweep.script, argv),
                   "jobs": jobs, "started": started, "wall_s": round(wall, 1), "returncode": code}  # fmt: skip
