@@ -13,13 +13,20 @@ def num(x: float, digits: int = 1) -> str:
     return f"{x:.{digits}f}" if math.isfinite(x) else "—"
 
 
-def format_stat(stat: SeedStat, digits: int = 1) -> str:
-    """``mean [low, high] n=k`` (no interval for one seed, ``—`` for none)."""
+def signed(x: float, digits: int = 1) -> str:
+    """``x`` with its sign and ``digits`` decimals (a difference), ``—`` if it is not finite."""
+    return f"{x:+.{digits}f}" if math.isfinite(x) else "—"
+
+
+def format_stat(stat: SeedStat, digits: int = 1, sign: bool = False) -> str:
+    """``mean [low, high] n=k`` (no interval for one seed, ``—`` for none); ``sign``: each number with
+    its sign (a difference)."""
     if stat.n == 0:
         return "—"
+    show = signed if sign else num
     if stat.n == 1:
-        return f"{num(stat.mean, digits)} n=1"
-    return f"{num(stat.mean, digits)} [{num(stat.low, digits)}, {num(stat.high, digits)}] n={stat.n}"
+        return f"{show(stat.mean, digits)} n=1"
+    return f"{show(stat.mean, digits)} [{show(stat.low, digits)}, {show(stat.high, digits)}] n={stat.n}"
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from evcd.report.markdown import markdown_table, num
+from evcd.report.markdown import format_stat, markdown_table, num, signed
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.sweep import JobResult
 
@@ -78,20 +78,14 @@ def day_rows(jobs: Sequence[JobResult]) -> dict[tuple[str, str, int], list[tuple
     return {key: sorted(rows) for key, rows in out.items()}
 
 
-def _signed(x: float) -> str:
-    return f"{x:+.1f}" if math.isfinite(x) else "—"
-
-
 def per_seed_text(p: PairedStat) -> str:
     """Each seed's mean difference, ``seed: difference`` joined by `` / `` (e.g. ``0: -4.0 / 1: +9.1``)."""
-    return " / ".join(f"{seed}: {_signed(d)}" for seed, d in p.per_seed.items())
+    return " / ".join(f"{seed}: {signed(d)}" for seed, d in p.per_seed.items())
 
 
 def paired_cell(p: PairedStat) -> str:
     """A table cell: the mean difference [interval across seeds] n=seeds; A lower / B lower of pairs."""
-    s = p.stat
-    interval = f" [{_signed(s.low)}, {_signed(s.high)}]" if s.n > 1 else ""
-    return f"{_signed(s.mean)}{interval} n={s.n}; {p.a_faster} / {p.b_faster} of {p.pairs}"
+    return f"{format_stat(p.stat, sign=True)}; {p.a_faster} / {p.b_faster} of {p.pairs}"
 
 
 def paired_markdown(jobs: Sequence[JobResult]) -> list[str]:

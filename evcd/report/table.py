@@ -8,7 +8,10 @@
 2. **Tabulate** per regime and EV count: a cell is the mean over seeds of each seed's evaluation mean
    travel time with its 95% interval across seeds, beside the paper's values (:data:`PAPER_TRAVEL_TIME`);
    then the share of the greedy -> hindsight gap each of :data:`GAP_AGENTS` closes, with its paired
-   bootstrap interval (:mod:`evcd.report.seed_stats`). Agents in the order :data:`AGENT_ORDER`.
+   bootstrap interval (:mod:`evcd.report.seed_stats`); the paired differences and evaluation days
+   (:mod:`evcd.report.paired`); where learners validated, their validation minus :data:`GAP_RULE`'s
+   per number of training episodes (what a training length can be chosen on). Agents in the order
+   :data:`AGENT_ORDER`.
 3. **Write** into the output directory (nothing existing is overwritten unless ``overwrite``):
    ``results.csv`` (one row per job), ``results.md`` (the tables), ``results_bars.png``,
    ``learning_curves.png`` and, where learners validated, ``validation_curves.png`` (the periodic
@@ -259,11 +262,38 @@ def _paper_table(jobs: Sequence[JobResult]) -> list[str]:
     ]
 
 
+def _validation_table(jobs: Sequence[JobResult]) -> list[str]:
+    """Each learner's validation minus :data:`GAP_RULE`'s per number of training episodes, over seeds
+    (nothing where no job validated with the rule)."""
+    gaps = validation_gaps(jobs)
+    if not gaps:
+        return []
+    regime = jobs[0].regime
+    after = sorted({e for panel in gaps.values() for runs in panel.values() for run in runs for e, _ in run})
+    rows = []
+    for agent, evs, _ in _agent_evs_groups(jobs):
+        runs = gaps.get((regime, evs), {}).get(agent)
+        if runs:
+            cells = [seed_interval(g for run in runs for e, g in run if e == n) for n in after]
+            rows.append([agent, str(evs), *(format_stat(c, sign=True) for c in cells)])
+    return [
+        "### Validation by training length (s)",
+        "",
+        f"The periodic validation, on tuning days (never the evaluation days): each learner's mean travel "
+        f"time minus {GAP_RULE}'s on the same validation episodes after each number of training episodes, "
+        "mean over seeds [95% Student-t interval across seeds]; negative: the learner is faster. What a "
+        "training length can be chosen on without looking at the evaluation.",
+        "",
+        *markdown_table(["agent", "EVs", *(f"after {n:,}" for n in after)], rows),
+    ]
+
+
 def results_markdown(
     collection: Collection, resamples: int = 10_000, bootstrap_seed: int = 0, figures: Sequence[str] = ()
 ) -> str:
-    """The Markdown report: per regime the main table, the gap shares, the per-agent details and (regime
-    ``paper``) the training means; then the gaps (with ``allow_incomplete``) and links to ``figures``."""
+    """The Markdown report: per regime the main table, the gap shares, the per-agent details, the paired
+    differences, the validation by training length and (regime ``paper``) the training means; then the
+    gaps (with ``allow_incomplete``) and links to ``figures``."""
     rng = np.random.default_rng(bootstrap_seed)
     jobs = collection.jobs
     lines = [
@@ -278,6 +308,8 @@ def results_markdown(
         lines += ["", f"## Regime `{regime}`", "", _jobs_line(group), ""]
         lines += [*_main_table(group), "", *_gap_table(group, rng, resamples), "", *_detail_table(group)]
         lines += ["", *paired_markdown(group)]
+        if validation := _validation_table(group):
+            lines += ["", *validation]
         if regime == "paper":
             lines += ["", *_paper_table(group)]
     if collection.gaps:
