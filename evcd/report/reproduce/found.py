@@ -223,10 +223,10 @@ def _products(combos: Sequence[tuple[str, ...]]) -> list[list[list[str]]]:
 
 
 def job_groups(jobs: Sequence[PageJob]) -> list[tuple[Sweep, tuple[str, ...], int]]:
-    """Multiruns that run exactly ``jobs``, as (sweep, overrides, jobs): per sweep, the fewest products
-    of values found axis by axis (``agent=dqn,greedy seed=3``; the jobs left of a sweep whose first
-    jobs finished are one multirun of the rest of the first agent and one of the other agents), each
-    job in exactly one, in the sweep's order; a job whose overrides name other axes runs alone."""
+    """Multiruns that run exactly ``jobs``, as (sweep, overrides, jobs): per sweep, products of values
+    found axis by axis (``agent=dqn,greedy seed=3``: the jobs left of a sweep stopped after its first
+    few make a few multiruns, not one per job), each job in exactly one, in the sweep's order; a job
+    whose overrides name other axes runs alone."""
     by_sweep: dict[str, list[PageJob]] = defaultdict(list)
     for job in jobs:
         by_sweep[job.sweep.name].append(job)

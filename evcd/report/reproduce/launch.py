@@ -201,7 +201,8 @@ def run_group(
                 code = process.wait(timeout=every_s if watch else None)
                 break
             except subprocess.TimeoutExpired:
-                watch()  # type: ignore[misc]
+                if watch:
+                    watch()
         if watch:
             watch()
         return code
