@@ -31,8 +31,10 @@ fleet run, where every guided EV's transitions reach the one shared learner.
    bootstrap interval.
 
 Files in ``run_dir``: ``train_episodes.csv``, ``episodes.csv`` (the agent's evaluation),
-``baseline_<rule>_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/``,
-``tensorboard/`` (and ``best/`` with ``validation.select_best``); a fleet run writes
+``baseline_<rule>_episodes.csv``, ``results.json``, ``learning_curve.png``, ``checkpoints/`` (the
+latest checkpoint, and the one after each validation: ``ckpt_<episodes>.pt``, a policy
+``scripts/evaluate.py`` can play, so that a training length chosen on the validation needs no
+retraining), ``tensorboard/`` (and ``best/`` with ``validation.select_best``); a fleet run writes
 ``train_fleet_episodes.csv``, ``fleet_episodes.csv``, ``baseline_<rule>_fleet_episodes.csv`` and
 ``fleet_trace.png`` instead of the episodes files. Nothing already there is overwritten: a run
 directory that holds a checkpoint is only entered again with ``resume=True``.
@@ -178,7 +180,9 @@ def train_episodes(
                 played.close()  # one simulation per process: the next call starts its own again
                 _validate(agent, validator, settings, run_dir, state, tlog)
             tlog.flush()
-            save_training(run_dir, agent, state, config)
+            # the policy of every validation stays evaluable (scripts/evaluate.py agent.checkpoint=...)
+            validated = [p.episodes_done for p in state.validation.points]
+            save_training(run_dir, agent, state, config, keep=validated)
             saved = state.episodes_done
     except KeyboardInterrupt:
         last = f"after {saved} episodes" if saved else "none yet"

@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Protocol, Self, TypeVar
@@ -218,16 +218,25 @@ def _is_off(value: Any) -> bool:
     return value is False or value is None or zero or (isinstance(value, list | tuple) and not value)
 
 
-def save_training(run_dir: Path, agent: Agent, state: SavedState, config: Mapping[str, Any] | None) -> None:
+def checkpoint_name(episodes_done: int) -> str:
+    """The stem of a run's checkpoint after ``episodes_done`` training episodes (``ckpt_0001200``)."""
+    return f"ckpt_{episodes_done:07d}"
+
+
+def save_training(
+    run_dir: Path, agent: Agent, state: SavedState, config: Mapping[str, Any] | None, keep: Sequence[int] = ()
+) -> None:
     """Write the agent, the trainer's position (its class's ``FORMAT``) and the config as the run's
-    latest checkpoint."""
+    latest checkpoint; the older ones are dropped but those after ``keep`` episodes (the validated
+    policies: :func:`checkpoint_name`)."""
     payload = {
         "format": state.FORMAT,
         "agent": agent.state_dict(),
         "trainer": state.to_dict(),
         "config": dict(config) if config is not None else None,
     }
-    path = save_checkpoint(run_dir / CHECKPOINTS, payload, f"ckpt_{state.episodes_done:07d}")
+    kept = [checkpoint_name(n) for n in keep]
+    path = save_checkpoint(run_dir / CHECKPOINTS, payload, checkpoint_name(state.episodes_done), kept)
     log.info("checkpoint after %d episodes: %s", state.episodes_done, path)
 
 

@@ -18,7 +18,7 @@ import hashlib
 import io
 import json
 import logging
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -66,13 +66,17 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def save_checkpoint(directory: str | Path, state: Mapping[str, Any], name: str) -> Path:
-    """Write ``state`` as ``directory/<name>.pt``, point ``latest.json`` at it, drop older ones.
+def save_checkpoint(
+    directory: str | Path, state: Mapping[str, Any], name: str, keep: Collection[str] = ()
+) -> Path:
+    """Write ``state`` as ``directory/<name>.pt``, point ``latest.json`` at it, drop older ones (but
+    those named in ``keep``).
 
     Args:
         directory: the checkpoint folder (created if missing).
         state: tensors, numpy arrays, plain Python values and containers of them.
         name: file stem, e.g. ``"ckpt_000100"`` (letters, digits, ``_`` and ``-``).
+        keep: stems of older checkpoints in ``directory`` to leave in place.
 
     Returns:
         The path of the new checkpoint file.
@@ -88,7 +92,7 @@ def save_checkpoint(directory: str | Path, state: Mapping[str, Any], name: str) 
     pointer = {"file": path.name, "sha256": _sha256(data), "bytes": len(data)}
     atomic_write_text(directory / POINTER, json.dumps(pointer, indent=1) + "\n")
     for old in directory.glob(f"*{SUFFIX}"):
-        if old.name != path.name:
+        if old.name != path.name and old.name.removesuffix(SUFFIX) not in keep:
             old.unlink(missing_ok=True)
     for stale in directory.glob(".*.tmp"):  # left by a process killed mid-write
         stale.unlink(missing_ok=True)

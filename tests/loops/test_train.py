@@ -432,6 +432,26 @@ def test_the_validation_plays_the_same_held_out_episodes_beside_the_rules(valida
 
 
 @pytest.mark.slow
+def test_the_checkpoint_of_every_validation_is_kept_and_plays_it_again(trained, validated):
+    run_dir = validated[0]
+    points = json.loads((run_dir / RESULTS_JSON).read_text())["validation"]["points"]
+    kept = sorted(p.name for p in (run_dir / CHECKPOINTS).glob("*.pt"))
+    assert kept == [f"ckpt_{p['episodes_done']:07d}.pt" for p in points] == [
+        "ckpt_0000010.pt", "ckpt_0000020.pt", "ckpt_0000030.pt"
+    ]  # fmt: skip
+    # without a validation, the latest alone
+    assert [p.name for p in (trained[0] / CHECKPOINTS).glob("*.pt")] == ["ckpt_0000030.pt"]
+    specs = episode_specs(3, range(8), VALIDATION_STREAM)
+    for point in points:
+        agent = learner()
+        agent.load_state_dict(
+            load_checkpoint(run_dir / CHECKPOINTS / f"ckpt_{point['episodes_done']:07d}.pt")["agent"]
+        )
+        rows = SingleEnvRunner(ToyDispatchEnv()).run(specs, agent, explore=False, learn=False)
+        assert [r.travel_time for r in rows] == point["travel_times"]
+
+
+@pytest.mark.slow
 def test_a_resumed_run_keeps_its_validation_curve(validated, tmp_path):
     run_dir, _agent, _result = validated
     stopped = tmp_path / "run"

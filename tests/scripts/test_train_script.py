@@ -490,7 +490,7 @@ def test_a_corrupted_checkpoint_is_reported_on_resume(small, uninterrupted, tmp_
     out = tmp_path / "run"
     shutil.copytree(uninterrupted, out)
     (out / "results.json").unlink()
-    ckpt = next((out / "checkpoints").glob("*.pt"))
+    ckpt = out / "checkpoints" / json.loads((out / "checkpoints" / "latest.json").read_text())["file"]
     ckpt.write_bytes(ckpt.read_bytes()[:1000])
     proc = run_train(*small, "agent=dueling_ddqn", "train.episodes=6", "train.checkpoint_every=2",
                      "resume=true", f"hydra.run.dir={out}")  # fmt: skip

@@ -154,6 +154,14 @@ def test_only_the_newest_checkpoint_remains(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["final.pt", POINTER]
 
 
+def test_older_checkpoints_named_in_keep_remain(tmp_path):
+    for i, name in enumerate(["ckpt_0000010", "ckpt_0000020", "ckpt_0000030"]):
+        save_checkpoint(tmp_path, _state(float(i)), name, keep=["ckpt_0000010"])
+    assert _pt_files(tmp_path) == ["ckpt_0000010.pt", "ckpt_0000030.pt"]
+    assert load_checkpoint(tmp_path)["value"] == 2.0  # the pointer names the newest
+    assert load_checkpoint(tmp_path / "ckpt_0000010.pt")["value"] == 0.0
+
+
 def test_saving_under_the_same_name_replaces_it(tmp_path):
     save_checkpoint(tmp_path, _state(1.0), "same")
     save_checkpoint(tmp_path, _state(2.0), "same")
