@@ -11,9 +11,11 @@ days, same guided EVs), so the dispatchers of a cell are paired by seed and epis
 with a Student-t interval across seeds (seeds are the independent draws of days and guided EVs), for
 the guided EVs and for ALL EVs charging in the window; and the paired differences of
 :data:`FLEET_PAIRS`: per seed the mean over episodes of A - B, then the mean over seeds with its
-t interval. Files: ``fleet_results.md``, ``fleet_results.csv`` (one row per job),
-``fleet_results_bars.png`` and, where learners validated, ``fleet_validation_curves.png`` (the periodic
-held-out validation per cell, and each seed paired with ``queue_aware`` on its own validation episodes).
+t interval; where learners validated, their validation minus ``queue_aware``'s per number of training
+episodes (:func:`evcd.report.table.validation_markdown`). Files: ``fleet_results.md``,
+``fleet_results.csv`` (one row per job), ``fleet_results_bars.png`` and, where learners validated,
+``fleet_validation_curves.png`` (the periodic held-out validation per cell, and each seed paired with
+``queue_aware`` on its own validation episodes).
 """
 
 from __future__ import annotations
@@ -38,7 +40,13 @@ from evcd.report.paired import PairedStat, paired_cell, paired_stat, per_seed_te
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, job_stamp, stamp_markdown
 from evcd.report.sweep import Collection, ResultsError, WrongTaskError, collect, world_label
-from evcd.report.table import GAP_RULE, validation_gaps, validation_points, validation_rule_means
+from evcd.report.table import (
+    GAP_RULE,
+    validation_gaps,
+    validation_markdown,
+    validation_points,
+    validation_rule_means,
+)
 from evcd.utils.atomic import atomic_write_text
 
 log = logging.getLogger(__name__)
@@ -258,6 +266,9 @@ def fleet_markdown(collection: Collection) -> str:
             "",
         ]
     lines += room_markdown(jobs, cells, {c: _cell_label(c, regimes) for c in cells}, head, agents)
+    if validation := validation_markdown(jobs, _panel, head, lambda c: _cell_label(c, regimes), _rank,
+                                         "guided EVs' mean travel time", "##"):  # fmt: skip
+        lines += [*validation, ""]
     pairs = [(a, b) for a, b in FLEET_PAIRS if a in agents and b in agents]
     if pairs:
         for measure, label in MEASURES.items():

@@ -262,32 +262,6 @@ def _paper_table(jobs: Sequence[JobResult]) -> list[str]:
     ]
 
 
-def _validation_table(jobs: Sequence[JobResult]) -> list[str]:
-    """Each learner's validation minus :data:`GAP_RULE`'s per number of training episodes, over seeds
-    (nothing where no job validated with the rule)."""
-    gaps = validation_gaps(jobs)
-    if not gaps:
-        return []
-    regime = jobs[0].regime
-    after = sorted({e for panel in gaps.values() for runs in panel.values() for run in runs for e, _ in run})
-    rows = []
-    for agent, evs, _ in _agent_evs_groups(jobs):
-        runs = gaps.get((regime, evs), {}).get(agent)
-        if runs:
-            cells = [seed_interval(g for run in runs for e, g in run if e == n) for n in after]
-            rows.append([agent, str(evs), *(format_stat(c, sign=True) for c in cells)])
-    return [
-        "### Validation by training length (s)",
-        "",
-        f"The periodic validation, on tuning days (never the evaluation days): each learner's mean travel "
-        f"time minus {GAP_RULE}'s on the same validation episodes after each number of training episodes, "
-        "mean over seeds [95% Student-t interval across seeds]; negative: the learner is faster. What a "
-        "training length can be chosen on without looking at the evaluation.",
-        "",
-        *markdown_table(["agent", "EVs", *(f"after {n:,}" for n in after)], rows),
-    ]
-
-
 def results_markdown(
     collection: Collection, resamples: int = 10_000, bootstrap_seed: int = 0, figures: Sequence[str] = ()
 ) -> str:
@@ -308,7 +282,7 @@ def results_markdown(
         lines += ["", f"## Regime `{regime}`", "", _jobs_line(group), ""]
         lines += [*_main_table(group), "", *_gap_table(group, rng, resamples), "", *_detail_table(group)]
         lines += ["", *paired_markdown(group)]
-        if validation := _validation_table(group):
+        if validation := validation_markdown(group, _regime_evs, ["EVs"], lambda k: [str(k[1])], agent_rank):
             lines += ["", *validation]
         if regime == "paper":
             lines += ["", *_paper_table(group)]
@@ -386,6 +360,40 @@ def validation_rule_means(jobs: Sequence[Any], key: PanelKey = _regime_evs) -> d
         for rule, mean in job.validation_rules:
             values[key(job)][rule].append(mean)
     return {k: {rule: float(np.mean(v)) for rule, v in rules.items()} for k, rules in values.items()}
+
+
+def validation_markdown(
+    jobs: Sequence[Any],
+    key: PanelKey,
+    head: Sequence[str],
+    label: Callable[[Any], list[str]],
+    rank: Callable[[str], Any],
+    what: str = "mean travel time",
+    heading: str = "###",
+) -> list[str]:
+    """The table of each learner's validation minus :data:`GAP_RULE`'s per number of training
+    episodes, mean over seeds with its interval: one row per panel (``key`` of a job, shown as
+    ``label(key)`` under the columns ``head``) and learner (ordered by ``rank``); nothing where no job
+    validated with the rule. What a training length can be chosen on, on tuning days only."""
+    gaps = validation_gaps(jobs, GAP_RULE, key)
+    if not gaps:
+        return []
+    after = sorted({e for panel in gaps.values() for runs in panel.values() for run in runs for e, _ in run})
+    rows = []
+    for panel, by_agent in gaps.items():
+        for agent in sorted(by_agent, key=rank):
+            stats = [seed_interval(g for run in by_agent[agent] for e, g in run if e == n) for n in after]
+            rows.append([*label(panel), agent, *(format_stat(x, sign=True) for x in stats)])
+    return [
+        f"{heading} Validation by training length (s)",
+        "",
+        f"The periodic validation, on tuning days (never the evaluation days): each learner's {what} minus "
+        f"{GAP_RULE}'s on the same validation episodes after each number of training episodes, mean over "
+        "seeds [95% Student-t interval across seeds]; negative: the learner is faster. What a training "
+        "length can be chosen on without looking at the evaluation.",
+        "",
+        *markdown_table([*head, "agent", *(f"after {n:,}" for n in after)], rows),
+    ]
 
 
 def make_table(

@@ -312,6 +312,12 @@ def test_validation_curves_per_cell_pair_each_seed_with_queue_aware(tmp_path) ->
     # paired per seed with queue_aware on its own validation episodes
     assert sorted(gaps[panel]["dqn"]) == sorted([(20, 50.0 - 9 * s), (40, -250.0 - 9 * s)] for s in SEEDS)
     assert matplotlib.image.imread(tmp_path / "out" / VALIDATION_PNG).shape[0] > 600  # two rows of panels
+    # the same gaps per training length, over seeds, in the table
+    assert "| EVs | guided share | agent | after 20 | after 40 |" in out.markdown
+    # 50, 41, 32 s after 20 episodes: 41.0 +- t(0.975, 2) * 9 / sqrt(3) = 22.4
+    assert "| 400 | 0.5 | dqn | +41.0 [+18.6, +63.4] n=3 | " in out.markdown
+    section = out.markdown.split("## Validation by training length")[1].split("\n## ")[0]
+    assert "| 400 | 1 | dqn | " in section and "queue_aware |" not in section
     # no learner validated: no figure
     plain = write_fleet_sweep(tmp_path / "plain", agents=("queue_aware",))
     assert VALIDATION_PNG not in {p.name for p in make_fleet_table([plain], tmp_path / "o2").paths}

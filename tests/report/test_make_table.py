@@ -547,6 +547,6 @@ def test_validation_curves_average_the_seeds_and_stay_out_of_the_csv(tmp_path):
     header = (tmp_path / "out" / CSV_NAME).read_text().splitlines()[0].split(",")
     assert "validation" not in header and "episode_travel" not in header and "eval_days" in header
     # the same gaps over seeds, per training length: 133.5 +- t(0.975, 1) * 3.5 = 44.5 after 100
-    assert "| agent | EVs | after 100 | after 200 |" in out.markdown
-    assert "| dqn | 200 | +133.5 [+89.0, +178.0] n=2 | +83.5 [+39.0, +128.0] n=2 |" in out.markdown
-    assert "| greedy | 200 |" not in out.markdown.split("### Validation by training length")[1]
+    assert "| EVs | agent | after 100 | after 200 |" in out.markdown
+    assert "| 200 | dqn | +133.5 [+89.0, +178.0] n=2 | +83.5 [+39.0, +128.0] n=2 |" in out.markdown
+    assert "| 200 | greedy |" not in out.markdown.split("### Validation by training length")[1]
