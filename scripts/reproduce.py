@@ -101,11 +101,6 @@ def main(argv: list[str] | None = None) -> int:
                 log.warning("%s", exc)
             return 0
         if args.check:
-            for folder in args.check:
-                if not folder.is_dir():
-                    hint = " (an override? overrides go before --check: PAGE OVERRIDES... --check DIR...)"
-                    hint = hint if "=" in folder.name else ""
-                    raise PageError(f"--check {folder}: no such folder{hint}")
             if out.exists():
                 raise FileExistsError(f"{out} exists: nothing there is overwritten (give a new --out)")
             found = find_jobs(page, args.check, extra)

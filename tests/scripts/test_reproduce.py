@@ -253,7 +253,7 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(reproduced, tmp
         "exists and is not a reproduction's folder": [page, "--out", taken],
         "unknown key(s) colour": [bad, "--out", out / "f"],
         "holds no run directory": [page, *check, tmp_path / "empty", "--out", out / "g"],
-        "--check env.cache_dir=x: no such folder (an override? overrides go before --check":
+        "env.cache_dir=x does not exist (an override? overrides go before --check)":
             [page, *check, sweeps, "env.cache_dir=x", "--out", out / "i"],
     }  # fmt: skip
     if importlib.util.find_spec("hydra_plugins.hydra_ray_launcher") is None:  # else it would run

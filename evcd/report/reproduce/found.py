@@ -154,16 +154,17 @@ def find_jobs(page: Page, folders: Sequence[Path], extra: Sequence[str] = ()) ->
     by_key = {job.key: job for job in jobs}
     candidates: dict[PageJob, list[RunDir]] = defaultdict(list)
     seen: set[Path] = set()
+    for folder in map(Path, folders):  # every folder first: a mistyped one is named before any match
+        if not folder.exists():
+            override = " (an override? overrides go before --check)" if "=" in folder.name else ""
+            raise PageError(f"{folder} does not exist{override}: give the multirun or run directories of "
+                            "the page's jobs")  # fmt: skip
     for folder in map(Path, folders):
         every = run_dirs(folder)
         runs = [r for r in every if r.resolve() not in seen]
         if not every:
-            what = (
-                "does not exist"
-                if not folder.exists()
-                else "holds no run directory (no .hydra/overrides.yaml)"
-            )
-            raise PageError(f"{folder} {what}: give the multirun or run directories of the page's jobs")
+            raise PageError(f"{folder} holds no run directory (no .hydra/overrides.yaml): give the multirun "
+                            "or run directories of the page's jobs")  # fmt: skip
         matched = 0
         for path in runs:
             seen.add(path.resolve())
