@@ -141,8 +141,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _terminated(signum: int, _frame: object) -> None:
-    """SIGTERM (``kill``, a cluster's time limit) ends the run as Ctrl-C does: the sweep running is
-    stopped with its whole process group (:func:`evcd.report.reproduce.launch.run_group`)."""
+    """SIGTERM (``kill``, a cluster's time limit) ends the run as Ctrl-C does: each sweep running is
+    stopped with every process it started (:func:`evcd.report.reproduce.launch.run_sweeps`)."""
     raise SystemExit(128 + signum)
 
 

@@ -4,11 +4,13 @@ through the reproduce command cold and warm, on a one-sweep page of the 8 x 8 gr
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 import yaml
 
-from evcd.report.reproduce.cost import measured_wall, parallel_jobs, small_page
+from evcd.report.reproduce.cost import measured_wall, small_page
+from evcd.report.reproduce.launch import parallel_jobs
 from evcd.report.reproduce.spec import PageError, load_page
 from tests.conftest import ROOT, run_script
 
@@ -38,14 +40,17 @@ def test_the_small_version_is_each_sweeps_first_job_on_the_benchs_cache(tmp_path
 def test_parallel_jobs_and_a_finished_reproduction_are_read(tmp_path):
     assert parallel_jobs([]) == 1
     assert parallel_jobs(["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]) == 2
-    with pytest.raises(PageError, match="n_jobs='two'"):
-        parallel_jobs(["hydra.launcher.n_jobs=two"])
-    launches = [{"sweep": "a", "jobs": 3, "wall_s": 100.0, "returncode": 0},
-                {"sweep": "b", "jobs": 2, "wall_s": 50.5, "returncode": 0},
-                {"sweep": "a", "jobs": 1, "wall_s": 20.0, "returncode": 0}]  # fmt: skip
+    assert parallel_jobs(["hydra.launcher.n_jobs=-1"]) == (os.cpu_count() or 1)
+    for bad in ("two", "0", "-2"):
+        with pytest.raises(PageError, match=f"n_jobs='{bad}': give a whole number >= 1"):
+            parallel_jobs([f"hydra.launcher.n_jobs={bad}"])
+    # b starts 60 s into a's first launch and ends 10.5 s after it; a's second launch comes later
+    launches = [{"sweep": sweep, "jobs": jobs, "started": f"2026-11-30T10:0{minute}:00", "wall_s": wall,
+                 "returncode": 0} for sweep, jobs, minute, wall in (("a", 3, 0, 100.0), ("b", 2, 1, 50.5),
+                                                                    ("a", 1, 5, 20.0))]  # fmt: skip
     (tmp_path / "reproduce.json").write_text(json.dumps({"page": "p", "launches": launches}))
     done = measured_wall(tmp_path)
-    assert done == {"page": "p", "wall_s": 170.5, "jobs": 6, "sweeps_s": {"a": 120.0, "b": 50.5}}
+    assert done == {"page": "p", "wall_s": 130.5, "jobs": 6, "sweeps_s": {"a": 120.0, "b": 50.5}}
     launches[1]["returncode"] = 1
     (tmp_path / "reproduce.json").write_text(json.dumps({"page": "p", "launches": launches}))
     with pytest.raises(PageError, match=r"sweeps \['b'\] failed"):

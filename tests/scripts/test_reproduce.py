@@ -3,7 +3,8 @@
 A tiny page of four rule jobs on the 8 x 8 grid (two sweeps) runs end to end once per test run
 (:func:`shared_folder`): its multiruns, the rendering (make_table, a dispatcher per seed, paired rows)
 and the comparison; then ``--check`` on its run directories is equal to the data committed from it,
-and names the cell edited in that data; a reproduction with a job deleted resumes just that job.
+and names the cell edited in that data; a reproduction with a job of each sweep deleted resumes just
+those, the two multiruns side by side on Hydra's joblib launcher with two slots.
 The refusals run in one process (:func:`run_refusals`). Every shipped page's jobs compose against
 ``conf/`` (no SUMO), and the rows and sections its comparisons read are on its committed pages.
 """
@@ -20,6 +21,7 @@ import signal
 import subprocess
 import sys
 import time
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -157,24 +159,33 @@ def test_a_page_runs_renders_and_checks_equal_then_names_an_edited_cell(reproduc
 
 
 @pytest.mark.slow
-def test_a_reproduction_resumes_only_the_jobs_left(reproduced, tmp_path):
+def test_a_reproduction_resumes_only_the_jobs_left_side_by_side(reproduced, tmp_path):
     out = tmp_path / "out"
     shutil.copytree(reproduced / "out", out, symlinks=True)
     shutil.rmtree(out / "rendered")
     kept = out / "sweeps" / "greedy" / "0_greedy_evs30_seed0" / "results.json"
     before = kept.read_bytes()
     shutil.rmtree(out / "sweeps" / "greedy" / "1_greedy_evs30_seed1")
-    proc = run_script("reproduce.py", reproduced / "page.yaml", "--out", out, "--root", reproduced / "root")
-    assert proc.returncode == 0, (proc.stdout + proc.stderr)[
-        -3000:
-    ]  # the same numbers: same seed, same result
+    shutil.rmtree(next((out / "sweeps" / "queue").glob("*_seed0")))
+    joblib = ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
+    proc = run_script(
+        "reproduce.py", reproduced / "page.yaml", *joblib, "--out", out, "--root", reproduced / "root"
+    )
+    # the same numbers as the jobs run one at a time: same seed, same result
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     launches = json.loads((out / "reproduce.json").read_text())["launches"]
-    assert [(x["sweep"], x["jobs"], Path(x["dir"]).name) for x in launches[2:]] == [
-        ("greedy", 1, "greedy-resume1")
+    left = sorted(launches[2:], key=lambda x: x["sweep"])
+    assert [(x["sweep"], x["jobs"], Path(x["dir"]).name) for x in left] == [
+        ("greedy", 1, "greedy-resume1"),
+        ("queue", 1, "queue-resume1"),
     ]
-    assert "seed=1" in launches[2]["command"] and "seed=0,1" not in launches[2]["command"]
+    assert "seed=1" in left[0]["command"] and "seed=0,1" not in left[0]["command"]
+    assert "seed=0" in left[1]["command"] and "seed=0,1" not in left[1]["command"]
+    # one job each on two slots: the second multirun starts beside the first, not after it
+    assert "sweep 2/2 queue: 1 job(s)" in proc.stderr and ", beside sweep 1/2 greedy" in proc.stderr
+    first, second = (datetime.fromisoformat(x["started"]).timestamp() for x in left)
+    assert abs(second - first) < left[0]["wall_s"]
     assert kept.read_bytes() == before and (out / "sweeps" / "greedy-resume1" / "multirun.yaml").is_file()
-    assert "sweep 1/1 greedy: 1 job(s)" in proc.stderr
 
 
 def _sessions() -> dict[int, int]:

@@ -35,7 +35,7 @@ from typing import Any
 
 import yaml
 
-from evcd.report.reproduce.launch import MANIFEST
+from evcd.report.reproduce.launch import MANIFEST, launches_span, parallel_jobs
 from evcd.report.reproduce.spec import Page, PageError
 
 log = logging.getLogger(__name__)
@@ -55,28 +55,10 @@ def small_page(page: Page, cache_dir: Path, extra: Sequence[str] = ()) -> dict[s
     return {"title": f"{page.title}: the first job of each sweep", "sweeps": sweeps, "renders": []}
 
 
-def parallel_jobs(hydra: Sequence[str]) -> int:
-    """The jobs a launcher runs at once, from Hydra's overrides (``hydra.launcher.n_jobs``; 1 without it).
-
-    Raises:
-        PageError: ``n_jobs`` is not a whole number >= 1.
-    """
-    value = 1
-    for o in hydra:
-        key, _, text = o.partition("=")
-        if key.lstrip("+~") == "hydra.launcher.n_jobs":
-            try:
-                value = int(text)
-            except ValueError:
-                value = 0
-            if value < 1:
-                raise PageError(f"hydra.launcher.n_jobs={text!r}: the bench needs a whole number >= 1")
-    return value
-
-
 def measured_wall(out: Path) -> dict[str, Any]:
-    """A finished reproduction's measured cost, from its ``reproduce.json``: the page, its launches'
-    summed wall time, their jobs, and per sweep its wall time.
+    """A finished reproduction's measured cost, from its ``reproduce.json``: the page, the wall time of
+    its launches (:func:`~evcd.report.reproduce.launch.launches_span`: overlapping launches counted
+    once), their jobs, and per sweep the wall time of its launches.
 
     Raises:
         PageError: ``out`` holds no reproduce.json, or a launch that failed.
@@ -90,10 +72,9 @@ def measured_wall(out: Path) -> dict[str, Any]:
     if not launches or failed:
         why = f"sweeps {failed} failed" if failed else "nothing was launched"
         raise PageError(f"{out}: {why}; the bench compares with a finished page")
-    per_sweep: dict[str, float] = {}
-    for launch in launches:
-        per_sweep[launch["sweep"]] = per_sweep.get(launch["sweep"], 0.0) + float(launch["wall_s"])
-    return {"page": manifest.get("page"), "wall_s": sum(per_sweep.values()),
+    per_sweep = {name: launches_span([x for x in launches if x["sweep"] == name])
+                 for name in dict.fromkeys(x["sweep"] for x in launches)}  # fmt: skip
+    return {"page": manifest.get("page"), "wall_s": launches_span(launches),
             "jobs": sum(int(launch["jobs"]) for launch in launches), "sweeps_s": per_sweep}  # fmt: skip
 
 

@@ -12,6 +12,13 @@ every launch with its command, wall time and exit code; the log names each job a
 the time the multirun's other jobs take at its pace so far. Run again with the same ``--out``, a page
 runs only the jobs that have not finished (into ``<name>-resume<k>``; nothing already written is
 touched).
+
+Launches overlap where a slot would idle: with ``hydra.launcher.n_jobs=N`` (:func:`parallel_jobs`) the
+next multirun starts as soon as the running ones hold fewer unfinished jobs than ``N`` (the last jobs
+of a sweep, or a resumed page's small groups, would otherwise leave cores idle until they end). It
+starts with its own ``N`` workers, so until the earlier one's last jobs end up to ``2N - 1`` jobs share
+the ``N`` cores. Jobs share only the day cache, which takes concurrent builders, and a job's episodes
+depend only on its seed: the order changes no job's numbers.
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ import contextlib
 import importlib.util
 import json
 import logging
+import math
 import os
 import signal
 import subprocess
@@ -28,7 +36,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from evcd.loops.run_files import RESULTS_JSON
 from evcd.report.reproduce.found import job_groups, read_run_dir, run_dirs
@@ -122,12 +130,14 @@ def finished_keys(folder: Path) -> set[frozenset[tuple[str, str]]]:
 
 
 def _free_dir(root: Path, name: str) -> Path:
-    if not (root / name).exists():
-        return root / name
-    k = 1
-    while (root / f"{name}-resume{k}").exists():
+    """``root/name``, or its first free ``-resume<k>``; made here, so that a launch started next finds it
+    taken before Hydra writes into it."""
+    path, k = root / name, 0
+    while path.exists():
         k += 1
-    return root / f"{name}-resume{k}"
+        path = root / f"{name}-resume{k}"
+    path.mkdir(parents=True)
+    return path
 
 
 def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[tuple[Sweep, list[str], int]]:
@@ -146,6 +156,41 @@ def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[tuple[
     return plan
 
 
+def parallel_jobs(hydra: Sequence[str]) -> int:
+    """The jobs a launcher runs at once, from Hydra's overrides: ``hydra.launcher.n_jobs`` (``-1``: every
+    core of this machine); 1 without it.
+
+    Raises:
+        PageError: ``n_jobs`` is neither a whole number >= 1 nor -1.
+    """
+    value = 1
+    for o in hydra:
+        key, _, text = o.partition("=")
+        if key.lstrip("+~") == "hydra.launcher.n_jobs":
+            try:
+                value = int(text)
+            except ValueError:
+                value = 0
+            if value == -1:
+                value = os.cpu_count() or 1
+            if value < 1:
+                raise PageError(
+                    f"hydra.launcher.n_jobs={text!r}: give a whole number >= 1 (or -1: every core)"
+                )
+    return value
+
+
+def launches_span(launches: Sequence[Mapping[str, Any]]) -> float:
+    """Seconds during which at least one of ``launches`` ran (from ``reproduce.json``: ``started`` and
+    ``wall_s``): their wall time together, overlapping launches counted once."""
+    spans = sorted((datetime.fromisoformat(x["started"]).timestamp(), float(x["wall_s"])) for x in launches)
+    total, end = 0.0, -math.inf
+    for start, wall in spans:
+        total += max(0.0, start + wall - max(start, end))
+        end = max(end, start + wall)
+    return total
+
+
 class FinishedJobs:
     """Called while a multirun runs: logs each of its jobs as its ``results.json`` appears, with how
     many are left and, at the pace so far, about how long they take (a page runs for hours).
@@ -160,6 +205,11 @@ class FinishedJobs:
         self.sweep_dir, self.label, self.total = Path(sweep_dir), label, total
         self.started = time.monotonic()
         self.seen: set[str] = set()
+
+    @property
+    def unfinished(self) -> int:
+        """The multirun's jobs whose ``results.json`` has not appeared yet (as of the last call)."""
+        return max(self.total - len(self.seen), 0)
 
     def __call__(self) -> None:
         """Log the jobs that finished since the last call."""
@@ -181,39 +231,66 @@ def _duration(seconds: float) -> str:
     return f"{seconds / 60:.0f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
 
 
-def run_group(
-    cmd: Sequence[str],
-    output: IO[str],
-    cwd: Path,
-    grace_s: float = 10.0,
-    watch: Callable[[], None] | None = None,
-    every_s: float = 10.0,
-) -> int:
-    """Run ``cmd`` in a process group of its own, its output to ``output``; its exit code. ``watch`` is
-    called every ``every_s`` while it runs and once after. If this process is stopped while it runs
-    (an exception here, such as ``KeyboardInterrupt`` or the ``SystemExit`` of a SIGTERM handler), the
-    whole group goes with it: the multirun, its launcher's workers, the jobs' day builds and second
-    processes, none left playing on into the run's folder (SIGTERM, then SIGKILL after ``grace_s``)."""
-    process = subprocess.Popen(cmd, stdout=output, stderr=subprocess.STDOUT, cwd=cwd, start_new_session=True)
-    try:
-        while True:
-            try:
-                code = process.wait(timeout=every_s if watch else None)
-                break
-            except subprocess.TimeoutExpired:
-                if watch:
-                    watch()
-        if watch:
-            watch()
-        return code
-    except BaseException:
-        log.warning(
-            "stopped: ending the sweep running (process group %d) and every process it started; "
-            "the same command resumes it",
-            process.pid,
+class Launch:
+    """One multirun of a page, running in a process group of its own, its output to ``<out>/logs``.
+
+    Args:
+        label: how the log names it (``sweep 1/3 table``).
+        sweep: the page's sweep.
+        argv: the script's arguments (``-m``, the overrides, Hydra's, the sweep folder).
+        sweep_dir: the multirun's folder.
+        jobs: its jobs.
+        logfile: where its output goes.
+        scripts_dir: the folder of the script; the multirun runs in the folder above it.
+        python: the interpreter.
+    """
+
+    def __init__(
+        self,
+        label: str,
+        sweep: Sweep,
+        argv: Sequence[str],
+        sweep_dir: Path,
+        jobs: int,
+        logfile: Path,
+        scripts_dir: Path,
+        python: str,
+    ) -> None:
+        self.label, self.sweep, self.argv = label, sweep, list(argv)
+        self.sweep_dir, self.jobs = sweep_dir, jobs
+        self.started = datetime.now().isoformat(timespec="seconds")
+        self.t0 = time.perf_counter()
+        self.watch = FinishedJobs(sweep_dir, label, jobs)
+        self._output = open(logfile, "a")  # noqa: SIM115 (closed when the launch ends)
+        cmd = [python, str(Path(scripts_dir) / sweep.script), *self.argv]
+        self.process = subprocess.Popen(
+            cmd,
+            stdout=self._output,
+            stderr=subprocess.STDOUT,
+            cwd=Path(scripts_dir).parent,
+            start_new_session=True,
         )
-        stop_group(process, grace_s)
-        raise
+
+    def poll(self) -> int | None:
+        """Log its newly finished jobs; its exit code once it has ended (``None`` while it runs)."""
+        code = self.process.poll()
+        self.watch()  # after the poll: a multirun that ended has written every job it finished
+        if code is not None:
+            self._output.close()
+        return code
+
+    def record(self, code: int) -> dict[str, Any]:
+        """What ``reproduce.json`` keeps of it, once it has ended with ``code``."""
+        return {"sweep": self.sweep.name, "dir": str(self.sweep_dir),
+                "command": display(self.sweep.script, self.argv), "jobs": self.jobs, "started": self.started,
+                "wall_s": round(time.perf_counter() - self.t0, 1), "returncode": code}  # fmt: skip
+
+    def stop(self, grace_s: float) -> None:
+        """End it with every process it started (:func:`stop_group`)."""
+        log.warning("stopped: ending the sweep running (process group %d) and every process it started; "
+                    "the same command resumes it", self.process.pid)  # fmt: skip
+        stop_group(self.process, grace_s)
+        self._output.close()
 
 
 def stop_group(process: subprocess.Popen[Any], grace_s: float) -> None:
@@ -238,37 +315,58 @@ def run_sweeps(
     hydra: Sequence[str],
     scripts_dir: Path,
     python: str = sys.executable,
+    every_s: float = 2.0,
+    grace_s: float = 10.0,
 ) -> list[Mapping[str, Any]]:
-    """Launch every sweep of ``page`` that has jobs left, one after another, into ``out/sweeps``; record
-    each launch (command, wall time, exit code) in ``out/reproduce.json``; return this call's launches.
-    A sweep whose multirun fails (a job failed) does not stop the others."""
+    """Launch every sweep of ``page`` that has jobs left into ``out/sweeps``, the next as soon as the
+    running ones leave a slot of :func:`parallel_jobs` idle (one after another without ``n_jobs``);
+    record each launch (command, wall time, exit code) in ``out/reproduce.json`` as it ends; return
+    this call's launches. A sweep whose multirun fails (a job failed) does not stop the others.
+
+    If this process is stopped meanwhile (an exception here, such as ``KeyboardInterrupt`` or the
+    ``SystemExit`` of a SIGTERM handler), every running multirun goes with it: its launcher's workers,
+    the jobs' day builds and second processes, none left playing on into the run's folder (SIGTERM,
+    then SIGKILL after ``grace_s``). ``every_s``: how often the running multiruns are looked at."""
     out = Path(out)
     plan = planned_launches(page, out, extra)
     if not plan:
         log.info("page %s: every job has finished in %s", page.name, out / SWEEPS)
-    launches = []
-    for i, (sweep, overrides, jobs) in enumerate(plan, 1):
-        sweep_dir = _free_dir(out / SWEEPS, sweep.name)
-        argv = ["-m", *overrides, *hydra, f"hydra.sweep.dir={sweep_dir}"]
-        (out / LOGS).mkdir(parents=True, exist_ok=True)
-        logfile = out / LOGS / f"{sweep_dir.name}.log"
-        log.info(
-            "sweep %d/%d %s: %d job(s) -> %s (output: %s)", i, len(plan), sweep.name, jobs, sweep_dir, logfile
-        )
-        started, t0 = datetime.now().isoformat(timespec="seconds"), time.perf_counter()
-        watch = FinishedJobs(sweep_dir, f"sweep {i}/{len(plan)} {sweep.name}", jobs)
-        with open(logfile, "a") as f:
-            cmd = [python, str(Path(scripts_dir) / sweep.script), *argv]
-            code = run_group(cmd, f, Path(scripts_dir).parent, watch=watch)
-        wall = time.perf_counter() - t0
-        launch = {"sweep": sweep.name, "dir": str(sweep_dir), "command": display(sweep.script, argv),
-                  "jobs": jobs, "started": started, "wall_s": round(wall, 1), "returncode": code}  # fmt: skip
-        manifest["launches"].append(launch)
-        atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
-        launches.append(launch)
-        if code == 0:
-            log.info("sweep %d/%d %s: done in %.0f s", i, len(plan), sweep.name, wall)
-        else:
-            log.warning("sweep %d/%d %s: exit code %d after %.0f s (a job failed?): see %s", i, len(plan),
-                        sweep.name, code, wall, logfile)  # fmt: skip
+    slots = parallel_jobs(hydra)
+    (out / LOGS).mkdir(parents=True, exist_ok=True)
+    waiting = list(enumerate(plan, 1))
+    running: list[Launch] = []
+    launches: list[Mapping[str, Any]] = []
+    try:
+        while waiting or running:
+            while waiting and (not running or sum(x.watch.unfinished for x in running) < slots):
+                i, (sweep, overrides, jobs) = waiting.pop(0)
+                sweep_dir = _free_dir(out / SWEEPS, sweep.name)
+                logfile = out / LOGS / f"{sweep_dir.name}.log"
+                argv = ["-m", *overrides, *hydra, f"hydra.sweep.dir={sweep_dir}"]
+                beside = f", beside {', '.join(x.label for x in running)}" if running else ""
+                log.info("sweep %d/%d %s: %d job(s) -> %s (output: %s)%s", i, len(plan), sweep.name, jobs,
+                         sweep_dir, logfile, beside)  # fmt: skip
+                label = f"sweep {i}/{len(plan)} {sweep.name}"
+                running.append(Launch(label, sweep, argv, sweep_dir, jobs, logfile, scripts_dir, python))
+            deadline = time.monotonic() + every_s
+            while time.monotonic() < deadline and all(x.process.poll() is None for x in running):
+                time.sleep(0.2)
+            for launch in list(running):
+                code = launch.poll()
+                if code is None:
+                    continue
+                running.remove(launch)
+                record = launch.record(code)
+                manifest["launches"].append(record)
+                atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+                launches.append(record)
+                if code == 0:
+                    log.info("%s: done in %.0f s", launch.label, record["wall_s"])
+                else:
+                    log.warning("%s: exit code %d after %.0f s (a job failed?): see %s", launch.label, code,
+                                record["wall_s"], out / LOGS / f"{launch.sweep_dir.name}.log")  # fmt: skip
+    except BaseException:
+        for launch in running:
+            launch.stop(grace_s)
+        raise
     return launches

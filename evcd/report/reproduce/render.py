@@ -34,6 +34,7 @@ from evcd.report.fleet_table import make_fleet_table
 from evcd.report.markdown import markdown_table, num
 from evcd.report.paired import PairedStat
 from evcd.report.reproduce.found import Found
+from evcd.report.reproduce.launch import launches_span
 from evcd.report.reproduce.spec import Page, PageError, PageJob, Render
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import job_stamp, stamp_markdown
@@ -189,12 +190,14 @@ def summary_markdown(page: Page, found: Found, manifest: Mapping[str, Any] | Non
         mine = [launch for launch in launches if launch.get("sweep") == sweep.name]
         jobs = [s for j, s in spans.items() if j.sweep == sweep and s is not None]
         span = (max(e for _, e in jobs) - min(b for b, _ in jobs)).total_seconds() if jobs else math.nan
-        wall = num(sum(float(launch["wall_s"]) for launch in mine), 0) if mine else "—"
+        wall = num(launches_span(mine), 0) if mine else "—"
         count = sum(j.sweep == sweep for j in found.finished)
         rows.append([sweep.name, sweep.script, str(count), str(len(mine)), wall, num(span, 0)])
     header = ["sweep", "script", "jobs", "launches", "launches' wall s", "jobs' span s"]
-    lines += ["## Sweeps", "", "Wall time of this command's launches (`reproduce.json`), and from the first "
-              "job's first log line to the last job's last.", "", *markdown_table(header, rows), "",
+    page_wall = f" The page: {num(launches_span(launches), 0)} s." if launches else ""
+    lines += ["## Sweeps", "", "Wall time of this command's launches (`reproduce.json`; launches that "
+              "overlapped counted once), and from the first job's first log line to the last job's last."
+              + page_wall, "", *markdown_table(header, rows), "",
               *(f"- `{launch['command']}`: {launch['wall_s']} s, exit code {launch['returncode']}"
                 for launch in launches), ""]  # fmt: skip
     rows = []
