@@ -18,8 +18,9 @@ the jobs' wall times). ``--check DIR...`` runs nothing: it renders from finished
 page's jobs matched by their overrides, wherever they ran). Either way the rendering is then compared
 with the committed data, cell by cell (:mod:`evcd.report.reproduce.check`).
 
-Stopped (Ctrl-C, or SIGTERM), it stops the sweep running with every process it started, and the same
-command with the same ``--out`` resumes it.
+Stopped (Ctrl-C, or SIGTERM), it stops the sweeps running with every process they started, and the
+same command with the same ``--out`` resumes it: the jobs left, a training job stopped after a
+checkpoint continued from it (in a copy of its run directory).
 
 Exit codes: 0 rendered, and equal to the committed data; 1 rendered, and different (each difference
 listed); 2 bad input (an unknown page, a run directory of another task or experiment, a launcher whose
@@ -53,12 +54,14 @@ RENDERED = "rendered"
 def dry_run(page: Page, out: Path, extra: list[str], hydra: list[str]) -> str:
     """The jobs :func:`main` would run into ``out`` now, with each multirun's exact command."""
     plan = planned_launches(page, out, extra)
-    total = sum(n for _, _, n in plan)
+    total = sum(x.jobs for x in plan)
     lines = [f"page {page.name} ({page.title}): {total} jobs to run in {len(plan)} multirun(s), into {out}"]
-    for i, (sweep, overrides, n) in enumerate(plan, 1):
-        argv = ["-m", *overrides, *hydra, f"hydra.sweep.dir={out / SWEEPS / sweep.name}"]
-        lines += [f"sweep {sweep.name} ({sweep.script}, {n} jobs):", f"  {display(sweep.script, argv)}"]
-        jobs = Sweep(sweep.name, sweep.script, sweep.task, sweep.regime, tuple(overrides)).jobs()
+    for i, x in enumerate(plan, 1):
+        sweep = x.sweep
+        argv = ["-m", *x.overrides, *hydra, f"hydra.sweep.dir={out / SWEEPS / sweep.name}"]
+        what = f"{x.jobs} jobs" if x.resume is None else f"continues {x.resume} from its last checkpoint"
+        lines += [f"sweep {sweep.name} ({sweep.script}, {what}):", f"  {display(sweep.script, argv)}"]
+        jobs = Sweep(sweep.name, sweep.script, sweep.task, sweep.regime, x.overrides).jobs()
         lines += [f"    {i}.{k} {' '.join(job)}" for k, job in enumerate(jobs, 1)]
     for render in page.renders:
         against = ", ".join(c.committed for c in render.compare) or "nothing"

@@ -210,9 +210,11 @@ def _task_overrides(sweep_dir: Path) -> list[str]:
 
 
 def job_overrides(job_dir: Path) -> tuple[str, ...]:
-    """The overrides a run directory records (``.hydra/overrides.yaml``; none if it has no record)."""
+    """The overrides a run directory records (``.hydra/overrides.yaml``; none if it has no record), but
+    ``resume``: a run continued from its checkpoint is the job it continues."""
     path = job_dir / OVERRIDES_YAML
-    return tuple(str(o) for o in _load_yaml(path) or ()) if path.is_file() else ()
+    recorded = (str(o) for o in _load_yaml(path) or ()) if path.is_file() else ()
+    return tuple(o for o in recorded if o.partition("=")[0].lstrip("+~") != "resume")
 
 
 def _log_reason(job_dir: Path) -> str:

@@ -202,30 +202,53 @@ def _sessions() -> dict[int, int]:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the processes from /proc")
-def test_a_stopped_reproduction_ends_every_process_it_started(script_overrides, tmp_path):
-    # its own day cache: the stop may come while the first job builds its day
-    overrides = [o for o in script_overrides if not o.startswith("env.cache_dir=")]
+def test_a_stopped_reproduction_ends_its_processes_and_continues_a_learner_from_its_checkpoint(
+    script_overrides, tmp_path
+):
+    learner = [*script_overrides, "agent=dueling_ddqn", "train.episodes=40", "train.checkpoint_every=2",
+               "train.validation.every=0", "learner.hidden=[16,16]", "learner.learning_starts=4",
+               "learner.batch_size=4", "learner.exploration_steps=10", "eval.episodes=2", "eval.baselines=[]",
+               "eval.bootstrap_resamples=200"]  # fmt: skip
     page = tmp_path / "page.yaml"
-    page.write_text(yaml.safe_dump(tiny_page([*overrides, f"env.cache_dir={tmp_path / 'cache'}"])))
+    definition = {"name": "learner", "script": "train.py", "task": "single", "regime": "peak"}
+    page.write_text(yaml.safe_dump({"title": "a learner", "renders": [],
+                                    "sweeps": [{**definition, "overrides": learner}]}))  # fmt: skip
     out = tmp_path / "out"
     cmd = [str(c) for c in (sys.executable, SCRIPTS / "reproduce.py", page, "--out", out, "--root", tmp_path)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    sweep = f"hydra.sweep.dir={out / 'sweeps' / 'greedy'}"
-    deadline, group = time.monotonic() + 120, None
-    while group is None and time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.2)
-        for pid in _sessions():
+    sweep = f"hydra.sweep.dir={out / 'sweeps' / 'learner'}"
+    pointer = out / "sweeps" / "learner" / "0_dueling_ddqn_evs30_seed0" / "checkpoints" / "latest.json"
+    deadline, group = time.monotonic() + 180, None
+    while not pointer.is_file() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+        for pid in _sessions() if group is None else ():
             with contextlib.suppress(OSError):
                 if sweep in Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0"):
                     group = pid
-    assert group is not None and proc.poll() is None, "the first sweep never started"
-    time.sleep(2)  # its job under way
-    proc.send_signal(signal.SIGTERM)
+    assert group is not None and pointer.is_file() and proc.poll() is None, "no checkpoint while it ran"
+    proc.send_signal(signal.SIGTERM)  # training, after its first checkpoint
     log, _ = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signal.SIGTERM, log[-3000:]
     assert f"stopped: ending the sweep running (process group {group})" in log
     assert group not in _sessions().values()  # nothing of the sweep left running
     assert not (out / "rendered").exists()
+
+    stopped = pointer.parent.parent
+    assert not (stopped / "results.json").exists()
+    before = {p.relative_to(stopped): p.read_bytes() for p in stopped.rglob("*") if p.is_file()}
+    episodes = int(json.loads(pointer.read_text())["file"].removeprefix("ckpt_").removesuffix(".pt"))
+    again = run_script("reproduce.py", page, "--out", out, "--root", tmp_path)
+    log = again.stdout + again.stderr
+    assert again.returncode == 0, log[-3000:]  # every job finished; nothing to compare with
+    assert f"sweep 1/1 learner: continues {stopped} from its last checkpoint, in a copy" in log
+    resumed = out / "sweeps" / "learner-resume1" / stopped.name
+    train_log = (resumed / "train.log").read_text()
+    assert f"resuming after {episodes} training episodes" in train_log, train_log[-2000:]
+    results = json.loads((resumed / "results.json").read_text())
+    assert results["training"]["sessions"] == 2 and results["training"]["episodes"] == 40
+    assert len((resumed / "train_episodes.csv").read_text().splitlines()) == 1 + 40
+    # the stopped run stays as it was
+    assert {p.relative_to(stopped): p.read_bytes() for p in stopped.rglob("*") if p.is_file()} == before
 
 
 @pytest.mark.slow

@@ -11,7 +11,8 @@ its output to ``<out>/logs/<name>.log``; ``<out>/reproduce.json`` records the pa
 every launch with its command, wall time and exit code; the log names each job as it finishes, with
 the time the multirun's other jobs take at its pace so far. Run again with the same ``--out``, a page
 runs only the jobs that have not finished (into ``<name>-resume<k>``; nothing already written is
-touched).
+touched); a training job stopped after a checkpoint continues from it (``resume=true``) in a copy of
+its run directory, so a page stopped every few hours loses at most a checkpoint interval per job.
 
 Launches overlap where a slot would idle: with ``hydra.launcher.n_jobs=N`` (:func:`parallel_jobs`) the
 next multirun starts as soon as the running ones hold fewer unfinished jobs than ``N`` (the last jobs
@@ -29,25 +30,30 @@ import json
 import logging
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from evcd.loops.run_files import RESULTS_JSON
+from evcd.loops.run_files import CHECKPOINTS, RESULTS_JSON
 from evcd.report.reproduce.found import job_groups, read_run_dir, run_dirs
 from evcd.report.reproduce.spec import Page, PageError, PageJob, Sweep, display, job_key
 from evcd.utils.atomic import atomic_write_text
+from evcd.utils.checkpoint import POINTER
 
 log = logging.getLogger(__name__)
 
 MANIFEST = "reproduce.json"
 SWEEPS = "sweeps"
 LOGS = "logs"
+#: The scripts whose runs continue from their last checkpoint with ``resume=true``.
+RESUMABLE_SCRIPTS = frozenset({"train.py"})
 #: Launcher option -> (the Hydra plugin it needs, the evcd extra that installs it; "" = installed with evcd).
 LAUNCHER_PLUGINS: dict[str, tuple[str, str]] = {
     "joblib": ("hydra_plugins.hydra_joblib_launcher", ""),
@@ -129,6 +135,22 @@ def finished_keys(folder: Path) -> set[frozenset[tuple[str, str]]]:
     return {job_key(r.overrides) for r in map(read_run_dir, run_dirs(folder)) if r.results is not None}
 
 
+def interrupted_runs(folder: Path) -> dict[frozenset[tuple[str, str]], Path]:
+    """Per job key, the run directory under ``folder`` of a job that was stopped after a checkpoint
+    (no ``results.json``, a checkpoint pointer): the latest checkpoint where several were."""
+    found: dict[frozenset[tuple[str, str]], Path] = {}
+    if not Path(folder).is_dir():
+        return found
+    for run in map(read_run_dir, run_dirs(folder)):
+        pointer = run.path / CHECKPOINTS / POINTER
+        if run.results is not None or not pointer.is_file():
+            continue
+        key = job_key(run.overrides)
+        if key not in found or pointer.stat().st_mtime > (found[key] / CHECKPOINTS / POINTER).stat().st_mtime:
+            found[key] = run.path
+    return found
+
+
 def _free_dir(root: Path, name: str) -> Path:
     """``root/name``, or its first free ``-resume<k>``; made here, so that a launch started next finds it
     taken before Hydra writes into it."""
@@ -140,19 +162,42 @@ def _free_dir(root: Path, name: str) -> Path:
     return path
 
 
-def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[tuple[Sweep, list[str], int]]:
-    """What :func:`run_sweeps` would launch now: (sweep, arguments after the script without Hydra's
-    overrides and sweep folder, jobs), the whole sweep as the page writes it where none of its jobs
-    finished, else a multirun of the jobs left (:func:`evcd.report.reproduce.found.job_groups`)."""
+@dataclass(frozen=True)
+class Planned:
+    """A multirun :func:`run_sweeps` launches.
+
+    Attributes:
+        sweep: the page's sweep.
+        overrides: the script's arguments after ``-m`` but Hydra's and the sweep folder.
+        jobs: its jobs.
+        resume: the run directory of a job stopped after a checkpoint, which this one-job multirun
+            continues (``resume=true``) in a copy of it (``None``: new jobs).
+    """
+
+    sweep: Sweep
+    overrides: tuple[str, ...]
+    jobs: int
+    resume: Path | None = None
+
+
+def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[Planned]:
+    """What :func:`run_sweeps` would launch now: the whole sweep as the page writes it where none of its
+    jobs has started; else first each job of ``train.py`` stopped after a checkpoint, continued from it
+    (:func:`interrupted_runs`), then multiruns of the jobs left
+    (:func:`evcd.report.reproduce.found.job_groups`)."""
     done = finished_keys(Path(out) / SWEEPS)
-    plan: list[tuple[Sweep, list[str], int]] = []
+    stopped = interrupted_runs(Path(out) / SWEEPS)
+    plan: list[Planned] = []
     for sweep in page.sweeps:
         jobs = [PageJob(sweep, combo) for combo in sweep.jobs(extra)]
         left = [j for j in jobs if j.key not in done]
-        if len(left) == len(jobs):
-            plan.append((sweep, [*sweep.overrides, *extra], len(jobs)))
-        elif left:
-            plan += [(sweep, list(overrides), n) for _, overrides, n in job_groups(left)]
+        resumed = [j for j in left if j.key in stopped and sweep.script in RESUMABLE_SCRIPTS]
+        if len(left) == len(jobs) and not resumed:
+            plan.append(Planned(sweep, (*sweep.overrides, *extra), len(jobs)))
+            continue
+        plan += [Planned(sweep, (*j.overrides, "resume=true"), 1, stopped[j.key]) for j in resumed]
+        rest = [j for j in left if j not in resumed]
+        plan += [Planned(sweep, tuple(overrides), n) for _, overrides, n in job_groups(rest)]
     return plan
 
 
@@ -229,6 +274,17 @@ def _duration(seconds: float) -> str:
     if seconds < 90:
         return f"{seconds:.0f} s"
     return f"{seconds / 60:.0f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
+
+
+def continue_in(run_dir: Path, sweep_dir: Path) -> str:
+    """Copy the stopped run directory ``run_dir`` into ``sweep_dir`` (under a hidden name, then renamed:
+    a copy cut short is never taken for a run) and return the copy's name, the ``hydra.sweep.subdir``
+    of the multirun that continues it: the stopped run stays as it was."""
+    partial = sweep_dir / f".{run_dir.name}.partial"
+    shutil.rmtree(partial, ignore_errors=True)
+    shutil.copytree(run_dir, partial, symlinks=True)
+    partial.rename(sweep_dir / run_dir.name)
+    return run_dir.name
 
 
 class Launch:
@@ -339,15 +395,22 @@ def run_sweeps(
     try:
         while waiting or running:
             while waiting and (not running or sum(x.watch.unfinished for x in running) < slots):
-                i, (sweep, overrides, jobs) = waiting.pop(0)
+                i, planned = waiting.pop(0)
+                sweep = planned.sweep
                 sweep_dir = _free_dir(out / SWEEPS, sweep.name)
                 logfile = out / LOGS / f"{sweep_dir.name}.log"
-                argv = ["-m", *overrides, *hydra, f"hydra.sweep.dir={sweep_dir}"]
+                argv = ["-m", *planned.overrides, *hydra, f"hydra.sweep.dir={sweep_dir}"]
+                what = f"{planned.jobs} job(s)"
+                if planned.resume is not None:
+                    argv.append(f"hydra.sweep.subdir='{continue_in(planned.resume, sweep_dir)}'")
+                    what = f"continues {planned.resume} from its last checkpoint, in a copy"
                 beside = f", beside {', '.join(x.label for x in running)}" if running else ""
-                log.info("sweep %d/%d %s: %d job(s) -> %s (output: %s)%s", i, len(plan), sweep.name, jobs,
-                         sweep_dir, logfile, beside)  # fmt: skip
+                log.info("sweep %d/%d %s: %s -> %s (output: %s)%s", i, len(plan), sweep.name, what, sweep_dir,
+                         logfile, beside)  # fmt: skip
                 label = f"sweep {i}/{len(plan)} {sweep.name}"
-                running.append(Launch(label, sweep, argv, sweep_dir, jobs, logfile, scripts_dir, python))
+                running.append(
+                    Launch(label, sweep, argv, sweep_dir, planned.jobs, logfile, scripts_dir, python)
+                )
             deadline = time.monotonic() + every_s
             while time.monotonic() < deadline and all(x.process.poll() is None for x in running):
                 time.sleep(0.2)
