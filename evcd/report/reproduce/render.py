@@ -45,6 +45,8 @@ from evcd.utils.atomic import atomic_write_text
 COLLECTED = "collected"
 SUMMARY = "reproduce.md"
 _STAMP = re.compile(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),(\d{3})\]")
+#: The first line a session of ``scripts/train.py`` logs (what it runs, ending ``seed <s> -> <run dir>``).
+_HEADER = re.compile(r"\]\[train\]\[INFO\] - .*, seed \d+ -> \S")
 
 
 # ---------------------------------------------------------------------------------------- views
@@ -158,15 +160,33 @@ def paired_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> lis
 
 
 # ---------------------------------------------------------------------------------------- timing
-def log_span(job_dir: Path) -> tuple[datetime, datetime] | None:
-    """When a job's logs begin and end (Hydra's stamps, ``[%Y-%m-%d %H:%M:%S,ms]``), or ``None``."""
-    stamps = []
-    for path in Path(job_dir).glob("*.log"):
+def _sessions(job_dir: Path) -> list[list[datetime]]:
+    """The stamps of a job's log lines (Hydra's, ``[%Y-%m-%d %H:%M:%S,ms]``), per session: a job
+    continued from its checkpoint holds each session's lines, each session begun by the script's
+    header (``... seed <s> -> <run directory>``)."""
+    sessions: list[list[datetime]] = []
+    for path in sorted(Path(job_dir).glob("*.log")):
         for line in path.read_text(errors="replace").splitlines():
             m = _STAMP.match(line)
-            if m:
-                stamps.append(datetime.strptime(f"{m.group(1)}.{m.group(2)}", "%Y-%m-%d %H:%M:%S.%f"))
+            if not m:
+                continue
+            if not sessions or (_HEADER.search(line) and sessions[-1]):
+                sessions.append([])
+            sessions[-1].append(datetime.strptime(f"{m.group(1)}.{m.group(2)}", "%Y-%m-%d %H:%M:%S.%f"))
+    return [s for s in sessions if s]
+
+
+def log_span(job_dir: Path) -> tuple[datetime, datetime] | None:
+    """When a job's logs begin and end, or ``None``."""
+    stamps = [t for session in _sessions(job_dir) for t in session]
     return (min(stamps), max(stamps)) if stamps else None
+
+
+def log_wall(job_dir: Path) -> float | None:
+    """A job's wall time from its log: each session's first to last line, summed (the time between
+    the sessions of a job continued from its checkpoint left out), or ``None``."""
+    sessions = _sessions(job_dir)
+    return sum((max(s) - min(s)).total_seconds() for s in sessions) if sessions else None
 
 
 def _varying(jobs: Sequence[PageJob]) -> dict[PageJob, str]:
@@ -205,13 +225,13 @@ def summary_markdown(page: Page, found: Found, manifest: Mapping[str, Any] | Non
         jobs = [j for j in found.finished if j.sweep == sweep]
         for job, label in _varying(jobs).items():
             training = found.results[job].get("training") or {}
-            span = spans[job]
+            wall = log_wall(found.finished[job])
             rows.append([sweep.name, label, num(float(training.get("wall_s") or 0.0), 0),
-                         num((span[1] - span[0]).total_seconds(), 0) if span else "—",
-                         str(found.finished[job])])  # fmt: skip
+                         num(wall, 0) if wall is not None else "—", str(found.finished[job])])  # fmt: skip
     header = ["sweep", "job", "training wall s", "job wall s", "run directory"]
     lines += ["## Jobs", "", "Training wall time (`results.json`: day builds and validation apart) and the "
-              "job's wall time (its log's first to last line).", "",
+              "job's wall time (its log's first to last line; a job continued from its checkpoint: each "
+              "session's, summed).", "",
               *markdown_table(header, rows)]  # fmt: skip
     return "\n".join(lines) + "\n"
 
