@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import torch
 
 from evcd.agents import make_agent_for_env
 from evcd.agents.dqn import DQNConfig
@@ -74,7 +75,10 @@ def fleet_overhead(env_kwargs: Mapping[str, Any], episodes: int = 3, seed: int =
 def fleet_learning_rate(
     env_kwargs: Mapping[str, Any], config: DQNConfig, episodes: int = 2, seed: int = 0
 ) -> dict[str, Any]:
-    """Agent steps per second while Dueling DDQN (``config``) learns on ``episodes`` fleet episodes."""
+    """Agent steps per second while Dueling DDQN (``config``) learns on ``episodes`` fleet episodes, on
+    one torch thread as ``scripts/train.py`` learns (``torch_threads``: beside a second job, a second
+    thread made the learner's updates ten times slower here)."""
+    torch.set_num_threads(1)
     env = FleetEnv(**env_kwargs)
     try:
         env.prepare()
