@@ -200,21 +200,25 @@ def _load_yaml(path: Path) -> Any:
         raise ResultsError(f"{path}: unreadable ({exc})") from exc
 
 
+def _job_defining(overrides: Any) -> list[str]:
+    """Recorded overrides but ``resume``: a run continued from its checkpoint is the job it continues."""
+    return [str(o) for o in overrides or () if str(o).partition("=")[0].lstrip("+~") != "resume"]
+
+
 def _task_overrides(sweep_dir: Path) -> list[str]:
     data = _load_yaml(sweep_dir / MULTIRUN_YAML)
     try:
         task = data["hydra"]["overrides"]["task"]
     except (KeyError, TypeError) as exc:
         raise ResultsError(f"{sweep_dir / MULTIRUN_YAML}: no hydra.overrides.task") from exc
-    return [str(o) for o in task or ()]
+    return _job_defining(task)
 
 
 def job_overrides(job_dir: Path) -> tuple[str, ...]:
     """The overrides a run directory records (``.hydra/overrides.yaml``; none if it has no record), but
     ``resume``: a run continued from its checkpoint is the job it continues."""
     path = job_dir / OVERRIDES_YAML
-    recorded = (str(o) for o in _load_yaml(path) or ()) if path.is_file() else ()
-    return tuple(o for o in recorded if o.partition("=")[0].lstrip("+~") != "resume")
+    return tuple(_job_defining(_load_yaml(path))) if path.is_file() else ()
 
 
 def _log_reason(job_dir: Path) -> str:

@@ -42,7 +42,7 @@ from evcd.report.reproduce.found import job_groups
 from evcd.report.reproduce.launch import check_launcher
 from evcd.report.reproduce.render import log_span, log_wall
 from evcd.report.reproduce.spec import PageError, PageJob, job_key, known_pages, load_page
-from evcd.report.sweep import world_label
+from evcd.report.sweep import collect, world_label
 from tests.conftest import CONF, ROOT, SCRIPTS, run_refusals, run_script, shared_folder
 
 PAGES = ROOT / "docs" / "reproduce"
@@ -248,6 +248,9 @@ def test_a_stopped_reproduction_ends_its_processes_and_continues_a_learner_from_
     results = json.loads((resumed / "results.json").read_text())
     assert results["training"]["sessions"] == 2 and results["training"]["episodes"] == 40
     assert len((resumed / "train_episodes.csv").read_text().splitlines()) == 1 + 40
+    # the continuing multirun is a sweep make_table reads like any other (resume=true makes no other job)
+    read = collect([resumed.parent])
+    assert (read.expected, [j.job_dir for j in read.jobs], read.gaps) == (1, [resumed], ())
     # its wall time counts both sessions, not the time between them
     begin, end = log_span(resumed)
     assert 0 < log_wall(resumed) < (end - begin).total_seconds() - 1
