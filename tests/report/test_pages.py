@@ -31,12 +31,27 @@ def test_the_headline_is_the_mean_over_seeds_of_the_committed_rows():
     assert f"| {sum(values) / 5:.1f} [" in readme.split("| 400 |")[1].split("\n")[0]
 
 
+def test_the_fleet_headline_pairs_the_committed_rows_by_seed():
+    """One cell recomputed by hand from docs/fleet_table/fleet_results.csv: DQN - central at share 1."""
+    by_agent: dict[str, dict[str, float]] = {"dqn": {}, "central": {}}
+    with open(ROOT / "docs" / "fleet_table" / "fleet_results.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["agent"] in by_agent and float(r["guided_share"]) == 1.0:
+                by_agent[r["agent"]][r["seed"]] = float(r["guided_travel"])
+    diffs = [by_agent["dqn"][s] - by_agent["central"][s] for s in by_agent["central"]]
+    assert len(diffs) == 5
+    line = next(x for x in (ROOT / "README.md").read_text().splitlines() if x.startswith("- The fleet at "))
+    assert f"DQN {sum(diffs) / 5:+.1f} [" in line.split("against queue_aware;")[1]
+
+
 def _copy_root(tmp_path: Path) -> Path:
     root = tmp_path / "repo"
     (root / "docs").mkdir(parents=True)
     for page in PAGES:
         shutil.copy(ROOT / page, root / page)
     shutil.copy(ROOT / "docs" / "results.csv", root / "docs" / "results.csv")
+    (root / "docs" / "fleet_table").mkdir()
+    shutil.copy(ROOT / "docs" / "fleet_table" / "fleet_results.csv", root / "docs" / "fleet_table")
     return root
 
 
@@ -77,7 +92,8 @@ def test_malformed_regions_are_refused_with_their_line(text, message):
 
 def test_a_malformed_page_exits_2_and_writes_nothing(tmp_path):
     root = _copy_root(tmp_path)
-    broken = (root / "README.md").read_text().replace(END, "", 1)
+    before, _, after = (root / "README.md").read_text().rpartition(END)  # the last region left open
+    broken = before + after
     (root / "README.md").write_text(broken)
     proc = run_script("render_pages.py", "--root", str(root))
     assert proc.returncode == 2 and "never closed" in proc.stderr
