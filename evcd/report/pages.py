@@ -24,13 +24,14 @@ from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
 
+from evcd.report import fleet_regions
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import NOT_RECORDED
 
 BEGIN = re.compile(r"^<!-- generated: ([a-z0-9-]+) -->$")
 END = "<!-- end generated -->"
 #: The pages that hold generated regions, relative to the repository root.
-PAGES = ("README.md",)
+PAGES = ("README.md", "docs/FLEET.md")
 #: The headline table's columns, in the results page's order.
 HEADLINE_AGENTS = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
 
@@ -73,47 +74,11 @@ def results_headline(root: Path) -> str:
     return "\n".join(lines)
 
 
-def _signed(stat: SeedStat) -> str:
-    return f"{stat.mean:+.1f} [{stat.low:+.1f}, {stat.high:+.1f}]"
-
-
-#: The fleet headline's learners and the rules they are paired with.
-FLEET_LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
-FLEET_RULES = ("queue_aware", "central")
-
-
-def fleet_headline(root: Path) -> str:
-    """The fleet table's headline at the highest competition (``guided_share`` 1) from
-    ``docs/fleet_table/fleet_results.csv``: each learner minus ``queue_aware`` and minus ``central``
-    on the guided EVs, paired by seed (each job's mean over the seed's episodes, all dispatchers of a
-    seed on the same episodes), mean over seeds with the 95% Student-t interval across seeds."""
-    per_seed: dict[str, dict[int, float]] = defaultdict(dict)
-    evs: set[str] = set()
-    days: set[str] = set()
-    with open(root / "docs" / "fleet_table" / "fleet_results.csv", newline="") as f:
-        for row in csv.DictReader(f):
-            if float(row["guided_share"]) == 1.0:
-                per_seed[row["agent"]][int(row["seed"])] = float(row["guided_travel"])
-                evs.add(row["evs"])
-                days.update(row["eval_days"].split())
-    pairs = []
-    for rule in FLEET_RULES:
-        cells = []
-        for learner, name in FLEET_LEARNERS.items():
-            seeds = sorted(set(per_seed[learner]) & set(per_seed[rule]))
-            stat = seed_interval(per_seed[learner][s] - per_seed[rule][s] for s in seeds)
-            cells.append(f"{name} {_signed(stat)}")
-        pairs.append(f"{' and '.join(cells)} s against {rule}")
-    seeds, where = len(per_seed["central"]), "/".join(sorted(evs))
-    return (f"- The fleet at {where} EVs, every charging EV guided ({seeds} seeds, {len(days)} held-out "
-            "days), each learner minus a rule on the same episodes (mean over seeds [95% t]): "
-            f"{'; '.join(pairs)}, the rule that assigns a tick's EVs jointly "
-            "([`docs/FLEET.md`](docs/FLEET.md)).")  # fmt: skip
-
-
 #: Region name -> its renderer (of the repository root).
 GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_headline,
-                                                "fleet-headline": fleet_headline}  # fmt: skip
+                                                "fleet-headline": fleet_regions.headline,
+                                                "fleet-share-one": fleet_regions.share_one,
+                                                "fleet-per-share": fleet_regions.per_share}  # fmt: skip
 
 
 def regions(text: str) -> list[tuple[str, int, int]]:

@@ -44,6 +44,20 @@ def test_the_fleet_headline_pairs_the_committed_rows_by_seed():
     assert f"DQN {sum(diffs) / 5:+.1f} [" in line.split("against queue_aware;")[1]
 
 
+def test_the_fleet_tables_recount_the_committed_rows():
+    """The fleet page's share-1 table from docs/fleet_table/fleet_results.csv, two cells by hand: the
+    truncated guided EVs of reservation, and the mean queue wait of greedy."""
+    with open(ROOT / "docs" / "fleet_table" / "fleet_results.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if float(r["guided_share"]) == 1.0]
+    truncated = sum(int(r["truncated"]) for r in rows if r["agent"] == "reservation")
+    waits = [float(r["queue_wait"]) for r in rows if r["agent"] == "greedy"]
+    lines = (ROOT / "docs" / "FLEET.md").read_text().splitlines()
+    truncated_row = next(x for x in lines if x.startswith("| guided EVs truncated")).split(" | ")
+    wait_row = next(x for x in lines if x.startswith("| mean queue wait (s)")).split(" | ")
+    assert truncated_row[3] == str(truncated)  # greedy, queue_aware, reservation
+    assert wait_row[1] == f"{sum(waits) / len(waits):.1f}"
+
+
 def _copy_root(tmp_path: Path) -> Path:
     root = tmp_path / "repo"
     (root / "docs").mkdir(parents=True)

@@ -1,0 +1,146 @@
+"""The fleet table's numbers on the documentation pages, rendered from ``docs/fleet_table/fleet_results.csv``.
+
+Each function takes the repository root and returns a generated region's Markdown
+(:mod:`evcd.report.pages`): the README's headline, and the fleet page's tables at the highest
+competition and per guided share. The csv holds one row per job; every dispatcher of a seed plays the
+same fleet episodes, so a difference paired by episode within a seed is the difference of the two jobs'
+means, and the paired rows here (the mean over seeds of those differences, with the 95% Student-t
+interval across seeds) are those of ``fleet_results.md``, which also counts the episodes each side won.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from evcd.report.seed_stats import SeedStat, seed_interval
+
+CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
+#: The table's dispatchers, in the page's order.
+DISPATCHERS = ("greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
+LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
+
+
+@dataclass(frozen=True)
+class Job:
+    """One job's row of the csv (the fields the pages show)."""
+
+    guided: int
+    truncated: int
+    guided_travel: float
+    all_travel: float
+    queue_wait: float
+    eval_days: tuple[str, ...]
+
+
+def read_jobs(root: Path) -> dict[float, dict[str, dict[int, Job]]]:
+    """guided share -> dispatcher -> seed -> its job, from the committed csv under ``root``."""
+    out: dict[float, dict[str, dict[int, Job]]] = defaultdict(lambda: defaultdict(dict))
+    with open(Path(root) / CSV, newline="") as f:
+        for r in csv.DictReader(f):
+            out[float(r["guided_share"])][r["agent"]][int(r["seed"])] = Job(
+                int(r["guided"]), int(r["truncated"]), float(r["guided_travel"]), float(r["all_travel"]),
+                float(r["queue_wait"]), tuple(r["eval_days"].split()))  # fmt: skip
+    return out
+
+
+def paired(jobs: dict[str, dict[int, Job]], a: str, b: str) -> SeedStat:
+    """``a`` minus ``b`` on the guided EVs, paired by seed, over the seeds both have."""
+    seeds = sorted(set(jobs[a]) & set(jobs[b]))
+    return seed_interval(jobs[a][s].guided_travel - jobs[b][s].guided_travel for s in seeds)
+
+
+def _mean(jobs: dict[int, Job], field: str) -> float:
+    """The mean over seeds of a job field."""
+    return seed_interval(getattr(j, field) for j in jobs.values()).mean
+
+
+def _total(jobs: dict[int, Job], field: str) -> int:
+    """The sum over seeds of a job count."""
+    return sum(int(getattr(j, field)) for j in jobs.values())
+
+
+def _signed(stat: SeedStat) -> str:
+    return f"{stat.mean:+.1f} [{stat.low:+.1f}, {stat.high:+.1f}]"
+
+
+def _marked(stat: SeedStat) -> str:
+    """The difference, in bold where its interval leaves out 0."""
+    text = _signed(stat)
+    return f"**{text}**" if stat.low > 0 or stat.high < 0 else text
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|---|" + "---:|" * (len(header) - 1),
+            *("| " + " | ".join(row) + " |" for row in rows)]  # fmt: skip
+
+
+def _share(share: float) -> str:
+    return f"{share:g}"
+
+
+def headline(root: Path) -> str:
+    """The README's fleet line: at share 1, each learner minus ``queue_aware`` and minus ``central``."""
+    jobs = read_jobs(root)[1.0]
+    pairs = []
+    for rule in ("queue_aware", "central"):
+        cells = [f"{name} {_signed(paired(jobs, learner, rule))}" for learner, name in LEARNERS.items()]
+        pairs.append(f"{' and '.join(cells)} s against {rule}")
+    days = {d for job in jobs["central"].values() for d in job.eval_days}
+    return (f"- The fleet at 600 EVs, every charging EV guided ({len(jobs['central'])} seeds, {len(days)} "
+            "held-out days), each learner minus a rule on the same episodes (mean over seeds [95% t]): "
+            f"{'; '.join(pairs)}, the rule that assigns a tick's EVs jointly "
+            "([`docs/FLEET.md`](docs/FLEET.md)).")  # fmt: skip
+
+
+def share_one(root: Path) -> str:
+    """The fleet page's table at the highest competition (share 1): per dispatcher the guided EVs' mean
+    travel time over seeds, everybody's, the truncated guided EVs and the mean queue wait; then each
+    learner minus each rule."""
+    jobs = read_jobs(root)[1.0]
+    guided = _total(jobs["central"], "guided")
+    travel = {a: seed_interval(j.guided_travel for j in jobs[a].values()) for a in DISPATCHERS}
+    rows = [
+        [
+            "mean over seeds [95 % t interval]",
+            *(f"{s.mean:.1f} [{s.low:.1f}, {s.high:.1f}]" for s in travel.values()),
+        ],
+        ["all EVs charging in the window", *(f"{_mean(jobs[a], 'all_travel'):.1f}" for a in DISPATCHERS)],
+        [f"guided EVs truncated (of {guided:,})", *(f"{_total(jobs[a], 'truncated')}" for a in DISPATCHERS)],
+        ["mean queue wait (s)", *(f"{_mean(jobs[a], 'queue_wait'):.1f}" for a in DISPATCHERS)],
+    ]
+    pairs = [[a, *(_marked(paired(jobs, a, rule)) for rule in ("queue_aware", "reservation", "central"))]
+             for a in LEARNERS]  # fmt: skip
+    caption = (
+        "Paired on the same episodes, guided EVs (s, mean over seeds [95% t]; bold: the interval "
+        "leaves out 0; the episodes each side won: `fleet_results.md`):"
+    )
+    return "\n".join([*_table(["guided EVs' mean travel time (s)", *DISPATCHERS], rows), "", caption, "",
+                      *_table(["", "- queue_aware", "- reservation", "- central"], pairs)])  # fmt: skip
+
+
+def per_share(root: Path) -> str:
+    """The fleet page's table per guided share: each dispatcher's guided EVs' mean travel time over seeds
+    (with its truncated guided EVs), then the learners and ``central`` paired with the rules."""
+    shares = read_jobs(root)
+    rows, pairs = [], []
+    for share in sorted(shares, reverse=True):
+        jobs = shares[share]
+        cells = []
+        for a in DISPATCHERS:
+            cut = _total(jobs[a], "truncated")
+            cells.append(f"{_mean(jobs[a], 'guided_travel'):.1f}" + (f" ({cut} trunc.)" if cut else ""))
+        rows.append([_share(share), f"{_total(jobs['central'], 'guided'):,}", *cells])
+        learners = [paired(jobs, a, rule) for rule in ("queue_aware", "central") for a in LEARNERS]
+        pairs.append([_share(share), *map(_marked, [*learners, paired(jobs, "central", "queue_aware")])])
+    header = ["share", "guided EVs", *DISPATCHERS]
+    pair_header = ["share", "dqn - queue_aware", "dueling_ddqn - queue_aware", "dqn - central",
+                   "dueling_ddqn - central", "central - queue_aware"]  # fmt: skip
+    return "\n".join([*_table(header, rows), "",
+                      "(Guided EVs' mean travel time, s, mean over seeds; intervals in `fleet_results.md`.) "
+                      "Paired on the same episodes (per seed the mean over its episodes, t interval across "
+                      "seeds; bold: the interval leaves out 0; the episodes each side won: "
+                      "`fleet_results.md`):", "", *_table(pair_header, pairs)])  # fmt: skip
