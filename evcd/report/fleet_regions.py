@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import csv
 from collections import defaultdict
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from evcd.report.markdown import markdown_table, signed
 from evcd.report.seed_stats import SeedStat, seed_interval
 
 CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
@@ -64,18 +64,13 @@ def _total(jobs: dict[int, Job], field: str) -> int:
 
 
 def _signed(stat: SeedStat) -> str:
-    return f"{stat.mean:+.1f} [{stat.low:+.1f}, {stat.high:+.1f}]"
+    return f"{signed(stat.mean)} [{signed(stat.low)}, {signed(stat.high)}]"
 
 
 def _marked(stat: SeedStat) -> str:
     """The difference, in bold where its interval leaves out 0."""
     text = _signed(stat)
     return f"**{text}**" if stat.low > 0 or stat.high < 0 else text
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|---|" + "---:|" * (len(header) - 1),
-            *("| " + " | ".join(row) + " |" for row in rows)]  # fmt: skip
 
 
 def _share(share: float) -> str:
@@ -118,8 +113,9 @@ def share_one(root: Path) -> str:
         "Paired on the same episodes, guided EVs (s, mean over seeds [95% t]; bold: the interval "
         "leaves out 0; the episodes each side won: `fleet_results.md`):"
     )
-    return "\n".join([*_table(["guided EVs' mean travel time (s)", *DISPATCHERS], rows), "", caption, "",
-                      *_table(["", "- queue_aware", "- reservation", "- central"], pairs)])  # fmt: skip
+    means = markdown_table(["guided EVs' mean travel time (s)", *DISPATCHERS], rows)
+    differences = markdown_table(["", "- queue_aware", "- reservation", "- central"], pairs)
+    return "\n".join([*means, "", caption, "", *differences])
 
 
 def per_share(root: Path) -> str:
@@ -139,8 +135,8 @@ def per_share(root: Path) -> str:
     header = ["share", "guided EVs", *DISPATCHERS]
     pair_header = ["share", "dqn - queue_aware", "dueling_ddqn - queue_aware", "dqn - central",
                    "dueling_ddqn - central", "central - queue_aware"]  # fmt: skip
-    return "\n".join([*_table(header, rows), "",
+    return "\n".join([*markdown_table(header, rows), "",
                       "(Guided EVs' mean travel time, s, mean over seeds; intervals in `fleet_results.md`.) "
                       "Paired on the same episodes (per seed the mean over its episodes, t interval across "
                       "seeds; bold: the interval leaves out 0; the episodes each side won: "
-                      "`fleet_results.md`):", "", *_table(pair_header, pairs)])  # fmt: skip
+                      "`fleet_results.md`):", "", *markdown_table(pair_header, pairs)])  # fmt: skip
