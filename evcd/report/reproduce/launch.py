@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from evcd.loops.run_files import CHECKPOINTS, RESULTS_JSON
-from evcd.report.reproduce.found import job_groups, read_run_dir, run_dirs
+from evcd.report.reproduce.found import RunDir, job_groups, read_run_dir, run_dirs
 from evcd.report.reproduce.spec import Page, PageError, PageJob, Sweep, display, job_key
 from evcd.utils.atomic import atomic_write_text
 from evcd.utils.checkpoint import POINTER
@@ -128,20 +128,21 @@ def open_output(page: Page, out: Path, extra: Sequence[str]) -> dict[str, Any]:
     return manifest
 
 
-def finished_keys(folder: Path) -> set[frozenset[tuple[str, str]]]:
-    """The job keys of the finished run directories under ``folder``."""
-    if not Path(folder).is_dir():
-        return set()
-    return {job_key(r.overrides) for r in map(read_run_dir, run_dirs(folder)) if r.results is not None}
+def read_runs(folder: Path) -> list[RunDir]:
+    """Every run directory under ``folder`` (none if it does not exist), read."""
+    return [read_run_dir(d) for d in run_dirs(folder)] if Path(folder).is_dir() else []
 
 
-def interrupted_runs(folder: Path) -> dict[frozenset[tuple[str, str]], Path]:
-    """Per job key, the run directory under ``folder`` of a job that was stopped after a checkpoint
-    (no ``results.json``, a checkpoint pointer): the latest checkpoint where several were."""
+def finished_keys(runs: Sequence[RunDir]) -> set[frozenset[tuple[str, str]]]:
+    """The job keys of the finished ones of ``runs``."""
+    return {job_key(r.overrides) for r in runs if r.results is not None}
+
+
+def interrupted_runs(runs: Sequence[RunDir]) -> dict[frozenset[tuple[str, str]], Path]:
+    """Per job key, the run directory among ``runs`` of a job that was stopped after a checkpoint (no
+    ``results.json``, a checkpoint pointer): the latest checkpoint where several were."""
     found: dict[frozenset[tuple[str, str]], Path] = {}
-    if not Path(folder).is_dir():
-        return found
-    for run in map(read_run_dir, run_dirs(folder)):
+    for run in runs:
         pointer = run.path / CHECKPOINTS / POINTER
         if run.results is not None or not pointer.is_file():
             continue
@@ -185,8 +186,8 @@ def planned_launches(page: Page, out: Path, extra: Sequence[str]) -> list[Planne
     jobs has started; else first each job of ``train.py`` stopped after a checkpoint, continued from it
     (:func:`interrupted_runs`), then multiruns of the jobs left
     (:func:`evcd.report.reproduce.found.job_groups`)."""
-    done = finished_keys(Path(out) / SWEEPS)
-    stopped = interrupted_runs(Path(out) / SWEEPS)
+    runs = read_runs(Path(out) / SWEEPS)
+    done, stopped = finished_keys(runs), interrupted_runs(runs)
     plan: list[Planned] = []
     for sweep in page.sweeps:
         jobs = [PageJob(sweep, combo) for combo in sweep.jobs(extra)]
