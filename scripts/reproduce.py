@@ -7,6 +7,7 @@ them with the data the page commits.
     python scripts/reproduce.py perturbed --dry-run     # the jobs and their exact commands; nothing runs
     python scripts/reproduce.py results --out outputs/reproduce/results/<time>   # resume: the jobs left
     python scripts/reproduce.py results --check outputs/table/evs400 outputs/table/evs300 outputs/table/evs200
+    python scripts/reproduce.py fleet --out outputs/reproduce/fleet/<time> --records docs/fleet_table/runs
 
 The pages (``docs/reproduce/<page>.yaml``: readme, results, fleet, perturbed; or a page file ``<path>.yaml``)
 name their sweeps, what is rendered from them and the committed files it is compared with
@@ -16,7 +17,12 @@ the overrides given here after the page (Hydra's, such as a launcher, pass throu
 launches, timed) and ``rendered/`` (each render's files and ``reproduce.md``: the stamp, the sweeps' and
 the jobs' wall times). ``--check DIR...`` runs nothing: it renders from finished run directories (the
 page's jobs matched by their overrides, wherever they ran). Either way the rendering is then compared
-with the committed data, cell by cell (:mod:`evcd.report.reproduce.check`).
+with the committed data, cell by cell (:mod:`evcd.report.reproduce.check`). ``--records DEST`` with the
+``--out`` of an earlier run runs nothing either: it keeps that folder's records in ``DEST`` (the
+manifest and each finished job's overrides, config, results, episode CSVs and log;
+:mod:`evcd.report.reproduce.records`), adding to the ones kept there before. ``--check DEST/sweeps``
+renders the page from them, and a copy of them as a new ``--out`` resumes the page with the jobs left,
+on any machine.
 
 Stopped (Ctrl-C, or SIGTERM), it stops the sweeps running with every process they started, and the
 same command with the same ``--out`` resumes it: the jobs left, a training job stopped after a
@@ -31,6 +37,7 @@ finish (each named, with the command that completes them).
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import shlex
 import signal
@@ -38,9 +45,18 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+from evcd.loops.run_files import RESULTS_JSON
 from evcd.report.reproduce.check import compare_page
 from evcd.report.reproduce.found import completion_commands, find_jobs, run_dirs
-from evcd.report.reproduce.launch import SWEEPS, check_launcher, open_output, planned_launches, run_sweeps
+from evcd.report.reproduce.launch import (
+    MANIFEST,
+    SWEEPS,
+    check_launcher,
+    open_output,
+    planned_launches,
+    run_sweeps,
+)
+from evcd.report.reproduce.records import keep_records
 from evcd.report.reproduce.render import render_page
 from evcd.report.reproduce.spec import Page, PageError, Sweep, display, load_page, split_overrides
 from evcd.report.sweep import ResultsError
@@ -84,6 +100,8 @@ def main(argv: list[str] | None = None) -> int:
                    "directories (run nothing) and compare with the committed data")  # fmt: skip
     p.add_argument("--out", type=Path, help="output folder (default outputs/reproduce/<page>/<time>); an "
                    "earlier run's folder resumes it")  # fmt: skip
+    p.add_argument("--records", type=Path, metavar="DEST", help="keep the records of the finished jobs of "
+                   "--out (an earlier run of the page) in DEST; run nothing")  # fmt: skip
     p.add_argument(
         "--root", type=Path, default=ROOT, help="where the committed data lies (default: this checkout)"
     )
@@ -96,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
         stamp = datetime.now().strftime("%Y-%m-%d_%H-%M-%S") + ("-check" if args.check else "")
         out = (args.out or Path("outputs") / "reproduce" / page.name / stamp).resolve()
         root = ["--root", str(args.root)] if args.root.resolve() != ROOT else []  # in the commands it prints
+        if args.records:
+            return _records(page, args.out, args.records, bool(args.check or args.dry_run))
         if args.dry_run:
             print(dry_run(page, out, extra, hydra))
             try:
@@ -141,6 +161,20 @@ def main(argv: list[str] | None = None) -> int:
     log.info("%s", f"{len(differences)} difference(s) from the committed data" if differences
              else "equal to the committed data")  # fmt: skip
     return 1 if differences else 0
+
+
+def _records(page: Page, out: Path | None, dest: Path, other_mode: bool) -> int:
+    """``--records``: keep the records of ``out`` (a run of ``page``) in ``dest``."""
+    if other_mode or out is None:
+        raise PageError("--records keeps the records of an earlier run: give its --out, without --check "
+                        "or --dry-run")  # fmt: skip
+    made = (out / MANIFEST).is_file() and json.loads((out / MANIFEST).read_text()).get("page")
+    if made and made != page.name:
+        raise PageError(f"{out} is a run of page {made!r}, not of page {page.name!r}")
+    copied = keep_records(out, dest)
+    jobs = {p.parent for p in copied if p.name == RESULTS_JSON}
+    log.info("%s: kept %d file(s) of %d newly finished job(s) from %s", dest, len(copied), len(jobs), out)
+    return 0
 
 
 def _terminated(signum: int, _frame: object) -> None:

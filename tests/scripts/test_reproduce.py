@@ -160,10 +160,34 @@ def test_a_page_runs_renders_and_checks_equal_then_names_an_edited_cell(reproduc
 
 
 @pytest.mark.slow
-def test_a_reproduction_resumes_only_the_jobs_left_side_by_side(reproduced, tmp_path):
+def test_a_reproductions_records_render_it_and_resume_it_elsewhere_side_by_side(reproduced, tmp_path):
+    page, root, records = reproduced / "page.yaml", reproduced / "root", tmp_path / "records"
+    assert _main()([str(page), "--out", str(reproduced / "out"), "--records", str(records)]) == 0
+    files = {p.relative_to(records).as_posix() for p in records.rglob("*") if p.is_file()}
+    job = "sweeps/greedy/0_greedy_evs30_seed0"
+    assert {
+        f"{job}/.hydra/overrides.yaml",
+        f"{job}/.hydra/config.yaml",
+        f"{job}/results.json",
+        f"{job}/episodes.csv",
+        f"{job}/train.log",
+        "sweeps/greedy/multirun.yaml",
+        "reproduce.json",
+    } <= files
+    assert sum(name.endswith("/results.json") for name in files) == 4
+    assert not [
+        name for name in files if name.endswith(".png") or "/checkpoints/" in name or "/tensorboard/" in name
+    ]
+    # the page rendered from its records alone, no simulation: equal to the committed data
+    same = run_script(
+        "reproduce.py", page, "--check", records / "sweeps", "--out", tmp_path / "a", "--root", root
+    )
+    log = same.stdout + same.stderr
+    assert same.returncode == 0 and "equal to the committed data" in log, log[-3000:]
+
+    # a copy of the records, two jobs taken out, resumes as an output folder of the page
     out = tmp_path / "out"
-    shutil.copytree(reproduced / "out", out, symlinks=True)
-    shutil.rmtree(out / "rendered")
+    shutil.copytree(records, out)
     kept = out / "sweeps" / "greedy" / "0_greedy_evs30_seed0" / "results.json"
     before = kept.read_bytes()
     shutil.rmtree(out / "sweeps" / "greedy" / "1_greedy_evs30_seed1")
@@ -187,6 +211,36 @@ def test_a_reproduction_resumes_only_the_jobs_left_side_by_side(reproduced, tmp_
     first, second = (datetime.fromisoformat(x["started"]).timestamp() for x in left)
     assert abs(second - first) < left[0]["wall_s"]
     assert kept.read_bytes() == before and (out / "sweeps" / "greedy-resume1" / "multirun.yaml").is_file()
+
+    # the resumed folder's records add the jobs it ran to the ones kept; a kept record that differs, or
+    # records of another reproduction, are refused and nothing is written
+    kept_before = {p: p.read_bytes() for p in records.rglob("*") if p.is_file()}
+    assert _main()([str(page), "--out", str(out), "--records", str(records)]) == 0
+    added = {
+        p.relative_to(records).as_posix() for p in records.rglob("*") if p.is_file() and p not in kept_before
+    }
+    assert {a.split("/")[1] for a in added if a.endswith("results.json")} == {
+        "greedy-resume1",
+        "queue-resume1",
+    }
+    assert all(p.read_bytes() == data for p, data in kept_before.items() if p.name != "reproduce.json")
+    assert json.loads((records / "reproduce.json").read_text()) == json.loads(
+        (out / "reproduce.json").read_text()
+    )
+    edited = records / "sweeps" / "greedy" / "0_greedy_evs30_seed0" / "results.json"
+    edited.write_text(edited.read_text().replace("greedy", "GREEDY", 1))
+    mine = tmp_path / "mine"
+    shutil.copytree(records / "sweeps", mine / "sweeps")
+    (mine / "reproduce.json").write_text(json.dumps({"page": "other", "launches": []}))
+    state = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    cases = {
+        "keeps 1 record file(s) with other content than": records,
+        "holds records of another reproduction": mine,
+    }
+    for message, dest in cases.items():
+        proc = run_script("reproduce.py", page, "--out", out, "--records", dest)
+        assert proc.returncode == 2 and message in proc.stderr, (proc.stdout + proc.stderr)[-3000:]
+    assert state == {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
 
 
 def _sessions() -> dict[int, int]:
