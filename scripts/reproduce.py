@@ -40,6 +40,7 @@ import argparse
 import json
 import logging
 import shlex
+import shutil
 import signal
 import sys
 from datetime import datetime
@@ -107,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = p.parse_intermixed_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    made: Path | None = None
     try:
         page = load_page(args.page, PAGES)
         extra, hydra = map(list, split_overrides(args.overrides))
@@ -126,6 +128,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.check:
             if out.exists():
                 raise FileExistsError(f"{out} exists: nothing there is overwritten (give a new --out)")
+            made = out  # the folder this call makes, with the parents it makes
+            while not made.parent.exists():
+                made = made.parent
             found = find_jobs(page, args.check, extra)
             more = out.parent / f"{out.name}-completion"
             again = shlex.join(["python", "scripts/reproduce.py", args.page, *args.overrides, "--check",
@@ -152,6 +157,8 @@ def main(argv: list[str] | None = None) -> int:
         log.info("rendered page %s into %s", page.name, rendered)
         differences, notes = compare_page(page, rendered, args.root)
     except (PageError, ResultsError, FileExistsError) as exc:
+        if made is not None:  # a --check that could not render leaves no folder behind
+            shutil.rmtree(made, ignore_errors=True)
         log.error("%s", exc)
         return 2
     for note in notes:

@@ -73,6 +73,9 @@ def tiny_page(overrides: list[str]) -> dict[str, Any]:
                  {"cells": ["queue_aware - greedy"], "a": "peak/queue_aware", "b": "peak/greedy"},
                  {"cells": ["by seed"], "a": "peak/queue_aware", "b": "peak/greedy", "by": "seed"}]},
              "compare": [{"kind": "markdown", "file": "pairs.md", "committed": page_md}]},
+            {"name": "worlds", "kind": "compare", "sweeps": ["greedy", "queue"],
+             "options": {"references": ["peak/greedy"], "against_calm": True},
+             "compare": [{"kind": "markdown", "file": "worlds.md", "committed": page_md}]},
         ],
     }  # fmt: skip
 
@@ -99,7 +102,8 @@ def reproduced(script_overrides, tmp_path_factory) -> Path:
         committed.mkdir()
         shutil.copy(rendered / "table" / "results.csv", committed / "results.csv")
         text = "".join((rendered / r / f).read_text() for r, f in
-                       (("table", "results.md"), ("seeds", "seeds.md"), ("pairs", "pairs.md")))  # fmt: skip
+                       (("table", "results.md"), ("seeds", "seeds.md"), ("pairs", "pairs.md"),
+                        ("worlds", "worlds.md")))  # fmt: skip
         (committed / "page.md").write_text(text)
 
     return shared_folder(tmp_path_factory, "reproduce_tiny_page", build)
@@ -121,6 +125,10 @@ def test_a_page_runs_renders_and_checks_equal_then_names_an_edited_cell(reproduc
         summary.count("| greedy | seed=") == 2 and summary.count("| queue | seed=") == 2
     )  # each job's wall time
     assert "| queue_aware - greedy | " in (out / "rendered" / "pairs" / "pairs.md").read_text()
+    # compare_runs.py's table: every world and dispatcher, each paired with the reference (none calm)
+    worlds = (out / "rendered" / "worlds" / "worlds.md").read_text()
+    assert "| world | dispatcher | seeds | mean travel time (s) | - peak / greedy |" in worlds
+    assert re.search(r"\| peak \| queue_aware \| 2 \| [\d.]+ \[[-\d.]+, [\d.]+\] \| [-+]", worlds)
 
     page, root = reproduced / "page.yaml", reproduced / "root"
     same = run_script(
@@ -336,6 +344,9 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(reproduced, tmp
     (tmp_path / "empty").mkdir()
     bad = tmp_path / "bad.yaml"
     bad.write_text(yaml.safe_dump({**tiny_page([]), "colour": "red"}))
+    no_row = yaml.safe_load(page.read_text())
+    no_row["renders"][-1]["options"]["references"] = ["peak/nope"]
+    (tmp_path / "no_row.yaml").write_text(yaml.safe_dump(no_row))
     out = tmp_path / "outs"
     check = ["--root", root, "--check"]
     cases = {
@@ -348,6 +359,8 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(reproduced, tmp
         "exists and is not a reproduction's folder": [page, "--out", taken],
         "unknown key(s) colour": [bad, "--out", out / "f"],
         "holds no run directory": [page, *check, tmp_path / "empty", "--out", out / "g"],
+        "compare: references='peak/nope' is not a row of the jobs; the rows: peak/greedy; peak/queue_aware":
+            [tmp_path / "no_row.yaml", *check, sweeps, "--out", out / "j"],
         "env.cache_dir=x does not exist (an override? overrides go before --check)":
             [page, *check, sweeps, "env.cache_dir=x", "--out", out / "i"],
     }  # fmt: skip

@@ -9,7 +9,9 @@ overrides and a link to each job's run directory, wherever it ran: a sweep split
 reads as one); ``seed_rows`` a dispatcher per row with its mean travel time per seed, the mean over
 seeds [95% t] and its training (decisions, wall time); ``paired_rows`` the rows of a page's table
 whose last cell pairs two (world, dispatcher) rows of :class:`evcd.report.compare.Runs` on the same
-episodes (or ``by: seed``, the seeds' means). ``rendered/reproduce.md`` stamps the whole with the
+episodes (or ``by: seed``, the seeds' means); ``compare`` ``scripts/compare_runs.py``'s table of every
+(world, dispatcher) row of the jobs, paired with ``references`` and, with ``against_calm``, with the same
+dispatcher calm. ``rendered/reproduce.md`` stamps the whole with the
 environment, code and machine of its jobs (:mod:`evcd.report.stamp`) and lists each sweep's launches
 and each job's wall time (training, from ``results.json``; the whole job, from its log's first and
 last lines).
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import math
 import re
+import shutil
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from datetime import datetime
@@ -29,7 +32,7 @@ import numpy as np
 import yaml
 
 from evcd.loops.run_files import ENVIRONMENTS
-from evcd.report.compare import Runs
+from evcd.report.compare import FLEET_MEASURES, Runs, compare_markdown
 from evcd.report.fleet_table import make_fleet_table
 from evcd.report.markdown import markdown_table, num
 from evcd.report.paired import PairedStat
@@ -123,11 +126,11 @@ def seed_rows(jobs: Mapping[PageJob, Path], results: Mapping[PageJob, Mapping[st
     return markdown_table(header, table)
 
 
-def _row(runs: Runs, text: Any, what: str) -> tuple[str, str]:
+def _row(runs: Runs, text: Any, what: str, kind: str = "paired_rows") -> tuple[str, str]:
     world, _, agent = str(text).rpartition("/")
     if (world, agent) not in runs.travel:
         known = "; ".join(f"{w}/{a}" for w, a in runs.rows())
-        raise PageError(f"paired_rows: {what}={text!r} is not a row of the jobs; the rows: {known}")
+        raise PageError(f"{kind}: {what}={text!r} is not a row of the jobs; the rows: {known}")
     return world, agent
 
 
@@ -136,6 +139,19 @@ def by_seed(runs: Runs, a: tuple[str, str], b: tuple[str, str]) -> SeedStat:
     ta, tb = runs.travel[a], runs.travel[b]
     return seed_interval(float(np.nanmean(list(ta[s].values())) - np.nanmean(list(tb[s].values())))
                          for s in sorted(ta.keys() & tb.keys()))  # fmt: skip
+
+
+def compare_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> list[str]:
+    """``scripts/compare_runs.py``'s table of the jobs: every (world, dispatcher) row, its difference
+    with each ``options['references']`` row (``world/dispatcher``) paired by episode, and with
+    ``options['against_calm']`` each perturbed row minus the same dispatcher calm; fleet runs on
+    ``options['fleet_measure']`` (default the guided EVs' travel time)."""
+    measure = str(options.get("fleet_measure") or "guided_travel")
+    if measure not in FLEET_MEASURES:
+        raise PageError(f"compare: fleet_measure={measure!r}: choose one of {', '.join(FLEET_MEASURES)}")
+    runs = Runs.read(list(jobs.values()), measure)
+    references = [_row(runs, r, "references", "compare") for r in options.get("references") or ()]
+    return compare_markdown(runs, references, bool(options.get("against_calm"))).splitlines()
 
 
 def paired_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> list[str]:
@@ -249,6 +265,8 @@ def render_one(render: Render, views: Mapping[str, Path], found: Found, folder: 
     if render.kind == "seed_rows":
         results = {j: found.results[j] for j in jobs}
         table = seed_rows(jobs, results, render.options)
+    elif render.kind == "compare":
+        table = compare_rows(jobs, render.options)
     else:
         table = paired_rows(jobs, render.options)
     title = str(render.options.get("title") or render.name)
@@ -273,13 +291,17 @@ def render_page(
 
     Raises:
         FileExistsError: ``folder`` exists.
-        PageError, ResultsError: a render's definition does not fit the jobs.
+        PageError, ResultsError: a render's definition does not fit the jobs (``folder`` is removed).
     """
     folder = Path(folder)
     if folder.exists():
         raise FileExistsError(f"{folder} exists: nothing there is overwritten (give a new --out)")
-    views = sweep_views(page, found, folder / COLLECTED, extra)
-    for render in page.renders:
-        render_one(render, views, found, folder / render.name)
-    atomic_write_text(folder / SUMMARY, summary_markdown(page, found, manifest))
+    try:
+        views = sweep_views(page, found, folder / COLLECTED, extra)
+        for render in page.renders:
+            render_one(render, views, found, folder / render.name)
+        atomic_write_text(folder / SUMMARY, summary_markdown(page, found, manifest))
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)  # a rendering is whole or absent
+        raise
     return folder

@@ -8,7 +8,8 @@ A page file names its **sweeps** (each a Hydra multirun of ``scripts/train.py``,
 ``train_sb3.py``: its overrides, as the page documents the command, and the task and regime its jobs
 record), its **renders** (what is made from which sweeps: ``table`` is ``scripts/make_table.py``,
 ``fleet_table`` its ``--fleet``, ``seed_rows`` a dispatcher's mean per seed, ``paired_rows`` paired
-differences between two rows of worlds and dispatchers) and, per render, the **committed data** it is
+differences between two rows of worlds and dispatchers, ``compare`` ``scripts/compare_runs.py``'s table
+of every world and dispatcher) and, per render, the **committed data** it is
 compared with (``csv``: a committed CSV by job key and column; ``markdown``: the tables of a committed
 page by header, row and column; ``regions``: a page's generated regions rendered from the new data).
 Unknown keys, kinds and scripts are refused with the allowed ones named (:class:`PageError`).
@@ -31,8 +32,8 @@ from evcd.report.sweep import JobResult, ResultsError, canonical_overrides, expa
 SCRIPTS = ("train.py", "evaluate.py", "train_sb3.py")
 TASKS = ("single", "fleet")
 #: What a render makes: ``table`` (make_table), ``fleet_table`` (make_table --fleet), ``seed_rows``,
-#: ``paired_rows`` (:mod:`evcd.report.reproduce.render`).
-RENDER_KINDS = ("table", "fleet_table", "seed_rows", "paired_rows")
+#: ``paired_rows``, ``compare`` (compare_runs; :mod:`evcd.report.reproduce.render`).
+RENDER_KINDS = ("table", "fleet_table", "seed_rows", "paired_rows", "compare")
 #: How a rendering is compared with committed data (:mod:`evcd.report.reproduce.check`).
 COMPARE_KINDS = ("csv", "markdown", "regions")
 #: Each table kind's job key: the columns a CSV row is matched by.
