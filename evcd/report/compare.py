@@ -134,11 +134,14 @@ def _episodes(path: Path) -> dict[int, float]:
     return {int(r.seed): math.nan if r.truncated else float(r.travel_time) for r in read_episodes_csv(path)}
 
 
-def compare_markdown(runs: Runs, references: Sequence[Row], against_calm: bool = False) -> str:
+def compare_markdown(
+    runs: Runs, references: Sequence[Row], against_calm: bool = False, worlds: Sequence[str] = ()
+) -> str:
     """A table: per (world, dispatcher), the mean over seeds and its paired difference with each
     reference row (mean over seeds of the per-seed mean differences [95% t]); with ``against_calm``,
     a last column: each perturbed row minus the same dispatcher calm (:meth:`Runs.against_calm`),
-    what the world's perturbations do to each dispatcher, with its seeds' differences."""
+    what the world's perturbations do to each dispatcher, with its seeds' differences. ``worlds``:
+    only the rows of these worlds (the references and calm rows they pair with may lie outside)."""
     header = [
         "world",
         "dispatcher",
@@ -149,6 +152,8 @@ def compare_markdown(runs: Runs, references: Sequence[Row], against_calm: bool =
     ]
     lines = []
     for row in runs.rows():
+        if worlds and row[0] not in worlds:
+            continue
         mean, n = runs.mean(row)
         cells = []
         for ref in references:

@@ -8,7 +8,7 @@ import shutil
 
 import pytest
 
-from evcd.report.compare import Runs
+from evcd.report.compare import Runs, compare_markdown
 from tests.conftest import run_script
 
 
@@ -33,6 +33,14 @@ def test_runs_of_a_seed_pair_across_worlds(script_overrides, tmp_path):
     assert set(rows) == {("peak", "greedy"), ("peak", "queue_aware"), ("peak sees P", "greedy"),
                          ("peak sees P", "queue_aware")}  # fmt: skip
     assert "+0.0 n=1; 0 / 0 of 4" in rows["peak sees P", "queue_aware"]
+    # only some worlds' rows (a page's render), still paired with a reference outside them
+    runs = Runs.read([tmp_path / "plain", tmp_path / "sees"])
+    lines = compare_markdown(runs, [("peak", "queue_aware")], worlds=["peak sees P"]).splitlines()[2:]
+    assert [line.split("|")[1:3] for line in lines] == [
+        [" peak sees P ", " greedy "],
+        [" peak sees P ", " queue_aware "],
+    ]
+    assert lines[1].endswith("| +0.0 n=1; 0 / 0 of 4 |")
     proc = run_script("compare_runs.py", str(tmp_path / "plain"), "--reference", "peak/hindsight")
     assert proc.returncode == 2 and "not a row" in proc.stdout + proc.stderr
     proc = run_script("compare_runs.py", str(tmp_path / "plain"), "--out", str(out))

@@ -47,7 +47,7 @@ from tests.conftest import CONF, ROOT, SCRIPTS, run_refusals, run_script, shared
 
 PAGES = ROOT / "docs" / "reproduce"
 #: The shipped pages and their jobs (what --dry-run counts).
-SHIPPED_JOBS = {"results": 90, "fleet": 90, "readme": 20, "perturbed": 25, "room": 90}
+SHIPPED_JOBS = {"results": 90, "fleet": 90, "readme": 20, "perturbed": 115, "room": 90}
 
 
 def tiny_page(overrides: list[str]) -> dict[str, Any]:
@@ -74,7 +74,7 @@ def tiny_page(overrides: list[str]) -> dict[str, Any]:
                  {"cells": ["by seed"], "a": "peak/queue_aware", "b": "peak/greedy", "by": "seed"}]},
              "compare": [{"kind": "markdown", "file": "pairs.md", "committed": page_md}]},
             {"name": "worlds", "kind": "compare", "sweeps": ["greedy", "queue"],
-             "options": {"references": ["peak/greedy"], "against_calm": True},
+             "options": {"references": ["peak/greedy"], "against_calm": True, "worlds": ["peak"]},
              "compare": [{"kind": "markdown", "file": "worlds.md", "committed": page_md}]},
         ],
     }  # fmt: skip
@@ -470,6 +470,9 @@ def test_every_job_of_a_shipped_page_composes(page):
             for side in ("a", "b"):
                 assert tuple(row[side].rsplit("/", 1)) in rows, (row[side], sorted(rows))
         assert set(render.options.get("order", ())) <= {a for _, a in rows}
+        for ref in render.options.get("references", ()):  # compare renders
+            assert tuple(ref.rsplit("/", 1)) in rows, (render.name, ref, sorted(rows))
+        assert set(render.options.get("worlds", ())) <= {w for w, _ in rows}, (render.name, sorted(rows))
 
 
 def test_a_page_definition_is_checked_with_the_allowed_values_named(tmp_path):

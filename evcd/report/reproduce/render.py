@@ -144,14 +144,22 @@ def by_seed(runs: Runs, a: tuple[str, str], b: tuple[str, str]) -> SeedStat:
 def compare_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> list[str]:
     """``scripts/compare_runs.py``'s table of the jobs: every (world, dispatcher) row, its difference
     with each ``options['references']`` row (``world/dispatcher``) paired by episode, and with
-    ``options['against_calm']`` each perturbed row minus the same dispatcher calm; fleet runs on
-    ``options['fleet_measure']`` (default the guided EVs' travel time)."""
+    ``options['against_calm']`` each perturbed row minus the same dispatcher calm; only the rows of
+    ``options['worlds']`` where it names some (the references and the calm rows may lie outside them);
+    fleet runs on ``options['fleet_measure']`` (default the guided EVs' travel time)."""
     measure = str(options.get("fleet_measure") or "guided_travel")
     if measure not in FLEET_MEASURES:
         raise PageError(f"compare: fleet_measure={measure!r}: choose one of {', '.join(FLEET_MEASURES)}")
     runs = Runs.read(list(jobs.values()), measure)
     references = [_row(runs, r, "references", "compare") for r in options.get("references") or ()]
-    return compare_markdown(runs, references, bool(options.get("against_calm"))).splitlines()
+    worlds = [str(w) for w in options.get("worlds") or ()]
+    if worlds:
+        known = {w for w, _ in runs.rows()}
+        unknown = [w for w in worlds if w not in known]
+        if unknown:
+            known_text = ", ".join(sorted(known))
+            raise PageError(f"compare: worlds {unknown} not among the jobs' worlds: {known_text}")
+    return compare_markdown(runs, references, bool(options.get("against_calm")), worlds).splitlines()
 
 
 def paired_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> list[str]:
