@@ -175,9 +175,12 @@ def _records(page: Page, out: Path | None, dest: Path, other_mode: bool) -> int:
     if other_mode or out is None:
         raise PageError("--records keeps the records of an earlier run: give its --out, without --check "
                         "or --dry-run")  # fmt: skip
-    made = (out / MANIFEST).is_file() and json.loads((out / MANIFEST).read_text()).get("page")
-    if made and made != page.name:
-        raise PageError(f"{out} is a run of page {made!r}, not of page {page.name!r}")
+    try:
+        ran = json.loads((out / MANIFEST).read_text()).get("page")
+    except (OSError, ValueError, AttributeError):
+        ran = None  # keep_records names what is wrong with it
+    if ran is not None and ran != page.name:
+        raise PageError(f"{out} is a run of page {ran!r}, not of page {page.name!r}")
     copied = keep_records(out, dest)
     jobs = {p.parent for p in copied if p.name == RESULTS_JSON}
     log.info("%s: kept %d file(s) of %d newly finished job(s) from %s", dest, len(copied), len(jobs), out)

@@ -361,6 +361,11 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(reproduced, tmp
         "holds no run directory": [page, *check, tmp_path / "empty", "--out", out / "g"],
         "compare: references='peak/nope' is not a row of the jobs; the rows: peak/greedy; peak/queue_aware":
             [tmp_path / "no_row.yaml", *check, sweeps, "--out", out / "j"],
+        "--records keeps the records of an earlier run: give its --out": [page, "--records", out / "k"],
+        f"{reproduced / 'out'} is a run of page 'page', not of page 'fleet'":
+            ["fleet", "--out", reproduced / "out", "--records", out / "l"],
+        f"{taken} is not a reproduction's folder (no reproduce.json)":
+            [page, "--out", taken, "--records", out / "m"],
         "env.cache_dir=x does not exist (an override? overrides go before --check)":
             [page, *check, sweeps, "env.cache_dir=x", "--out", out / "i"],
     }  # fmt: skip
