@@ -295,6 +295,8 @@ def test_a_stopped_reproduction_ends_its_processes_and_continues_a_learner_from_
     assert f"stopped: ending the sweep running (process group {group})" in log
     assert group not in _sessions().values()  # nothing of the sweep left running
     assert not (out / "rendered").exists()
+    (launch,) = json.loads((out / "reproduce.json").read_text())["launches"]  # its wall time kept
+    assert launch["stopped"] is True and launch["wall_s"] > 0 and launch["returncode"] != 0
 
     stopped = pointer.parent.parent
     assert not (stopped / "results.json").exists()
@@ -304,6 +306,8 @@ def test_a_stopped_reproduction_ends_its_processes_and_continues_a_learner_from_
     log = again.stdout + again.stderr
     assert again.returncode == 0, log[-3000:]  # every job finished; nothing to compare with
     assert f"sweep 1/1 learner: continues {stopped} from its last checkpoint, in a copy" in log
+    launches = json.loads((out / "reproduce.json").read_text())["launches"]
+    assert [x.get("stopped", False) for x in launches] == [True, False] and launches[0] == launch
     resumed = out / "sweeps" / "learner-resume1" / stopped.name
     train_log = (resumed / "train.log").read_text()
     assert f"resuming after {episodes} training episodes" in train_log, train_log[-2000:]

@@ -383,7 +383,8 @@ def run_sweeps(
     If this process is stopped meanwhile (an exception here, such as ``KeyboardInterrupt`` or the
     ``SystemExit`` of a SIGTERM handler), every running multirun goes with it: its launcher's workers,
     the jobs' day builds and second processes, none left playing on into the run's folder (SIGTERM,
-    then SIGKILL after ``grace_s``). ``every_s``: how often the running multiruns are looked at."""
+    then SIGKILL after ``grace_s``); each is recorded as ``stopped``, with its wall time. ``every_s``:
+    how often the running multiruns are looked at."""
     out = Path(out)
     plan = planned_launches(page, out, extra)
     if not plan:
@@ -432,5 +433,11 @@ def run_sweeps(
     except BaseException:
         for launch in running:
             launch.stop(grace_s)
+            # a stopped launch counts in the page's wall time too (records carried to another machine)
+            record = {**launch.record(launch.process.returncode), "stopped": True}
+            manifest["launches"].append(record)
+            launches.append(record)
+        if running:
+            atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
         raise
     return launches
