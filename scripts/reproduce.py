@@ -37,7 +37,6 @@ finish (each named, with the command that completes them).
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import shlex
 import shutil
@@ -49,14 +48,7 @@ from pathlib import Path
 from evcd.loops.run_files import RESULTS_JSON
 from evcd.report.reproduce.check import compare_page
 from evcd.report.reproduce.found import completion_commands, find_jobs, run_dirs
-from evcd.report.reproduce.launch import (
-    MANIFEST,
-    SWEEPS,
-    check_launcher,
-    open_output,
-    planned_launches,
-    run_sweeps,
-)
+from evcd.report.reproduce.launch import SWEEPS, check_launcher, open_output, planned_launches, run_sweeps
 from evcd.report.reproduce.records import keep_records
 from evcd.report.reproduce.render import render_page
 from evcd.report.reproduce.spec import Page, PageError, Sweep, display, load_page, split_overrides
@@ -175,13 +167,7 @@ def _records(page: Page, out: Path | None, dest: Path, other_mode: bool) -> int:
     if other_mode or out is None:
         raise PageError("--records keeps the records of an earlier run: give its --out, without --check "
                         "or --dry-run")  # fmt: skip
-    try:
-        ran = json.loads((out / MANIFEST).read_text()).get("page")
-    except (OSError, ValueError, AttributeError):
-        ran = None  # keep_records names what is wrong with it
-    if ran is not None and ran != page.name:
-        raise PageError(f"{out} is a run of page {ran!r}, not of page {page.name!r}")
-    copied = keep_records(out, dest)
+    copied = keep_records(out, dest, page.name)
     jobs = {p.parent for p in copied if p.name == RESULTS_JSON}
     log.info("%s: kept %d file(s) of %d newly finished job(s) from %s", dest, len(copied), len(jobs), out)
     return 0

@@ -30,8 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from evcd.loops.run_files import RESULTS_JSON
-from evcd.report.reproduce.found import run_dirs
-from evcd.report.reproduce.launch import MANIFEST, SWEEPS
+from evcd.report.reproduce.launch import MANIFEST, SWEEPS, read_runs
 from evcd.report.reproduce.spec import PageError
 from evcd.report.sweep import MULTIRUN_YAML, OVERRIDES_YAML
 from evcd.utils.atomic import atomic_write_bytes
@@ -46,47 +45,46 @@ def _manifest(folder: Path) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        return json.loads(path.read_text())
+        manifest = json.loads(path.read_text())
     except ValueError:
-        raise PageError(f"{path} is not readable JSON: not a reproduction's manifest") from None
-
-
-def _finished(run: Path) -> bool:
-    try:
-        return isinstance(json.loads((run / RESULTS_JSON).read_text()), dict)
-    except (OSError, ValueError):
-        return False
+        manifest = None
+    if not isinstance(manifest, dict):
+        raise PageError(f"{path} is not a reproduction's manifest (not a JSON object)")
+    return manifest
 
 
 def record_files(out: Path) -> Iterator[Path]:
     """The record files of ``out`` (relative to it): each finished job's (:data:`RECORD_FILES`) and its
     sweep's ``multirun.yaml``; the manifest apart."""
     sweeps = set()
-    for run in run_dirs(out / SWEEPS):
-        if not _finished(run):
+    for run in read_runs(out / SWEEPS):
+        if run.results is None:  # not finished
             continue
         for pattern in RECORD_FILES:
-            for path in sorted(run.glob(pattern)):
+            for path in sorted(run.path.glob(pattern)):
                 if path.is_file():
                     yield path.relative_to(out)
-        sweeps.add(run.parent)
+        sweeps.add(run.path.parent)
     for sweep in sorted(sweeps):
         if (sweep / MULTIRUN_YAML).is_file():
             yield (sweep / MULTIRUN_YAML).relative_to(out)
 
 
-def _check_manifests(out: Path, dest: Path) -> bytes:
-    """``out``'s manifest (as bytes), after checking that ``dest``'s, if any, is an earlier state of it.
+def _check_manifests(out: Path, dest: Path, page: str | None) -> bytes:
+    """``out``'s manifest (as bytes), after checking that it is a run of ``page`` (any page: ``None``)
+    and that ``dest``'s, if any, is an earlier state of it.
 
     Raises:
-        PageError: ``out`` is not a reproduction's folder, or ``dest`` holds the records of another
-            page, other overrides, or launches ``out`` does not hold.
+        PageError: ``out`` is not a reproduction's folder or not one of ``page``, or ``dest`` holds the
+            records of another page, other overrides, or launches ``out`` does not hold.
     """
     new = _manifest(out)
     if new is None:
         raise PageError(
             f"{out} is not a reproduction's folder (no {MANIFEST}): give the --out of a page's run"
         )
+    if page is not None and new.get("page") != page:
+        raise PageError(f"{out} is a run of page {new.get('page')!r}, not of page {page!r}")
     old = _manifest(dest)
     if old is not None:
         same = all(old.get(k) == new.get(k) for k in ("page", "sweeps", "overrides"))
@@ -98,16 +96,17 @@ def _check_manifests(out: Path, dest: Path) -> bytes:
     return (out / MANIFEST).read_bytes()
 
 
-def keep_records(out: Path, dest: Path) -> list[Path]:
-    """Copy the records of the output folder ``out`` into ``dest`` (made if need be): the files not
-    kept yet, then the manifest. Returns the files copied, relative to ``dest`` (the manifest last).
+def keep_records(out: Path, dest: Path, page: str | None = None) -> list[Path]:
+    """Copy the records of the output folder ``out`` (a run of ``page``, where named) into ``dest``
+    (made if need be): the files not kept yet, then the manifest. Returns the files copied, relative
+    to ``dest`` (the manifest last).
 
     Raises:
         PageError: :func:`_check_manifests` refuses, or a record is kept in ``dest`` with other content
             (each such file named); nothing is written then.
     """
     out, dest = Path(out), Path(dest)
-    manifest = _check_manifests(out, dest)
+    manifest = _check_manifests(out, dest, page)
     new, differ = [], []
     for rel in record_files(out):
         kept = dest / rel
