@@ -26,7 +26,7 @@ from pathlib import Path
 
 from evcd.report import fleet_regions
 from evcd.report.seed_stats import SeedStat, seed_interval
-from evcd.report.stamp import NOT_RECORDED
+from evcd.report.stamp import NOT_RECORDED, JobStamp, stamp_sentence
 
 BEGIN = re.compile(r"^<!-- generated: ([a-z0-9-]+) -->$")
 END = "<!-- end generated -->"
@@ -48,12 +48,13 @@ def results_headline(root: Path) -> str:
     """The results table's headline: mean travel time per EV count and dispatcher over the seeds of
     ``docs/results.csv`` (the table's regime), with the 95% Student-t interval across seeds."""
     by_cell: dict[tuple[int, str], list[float]] = defaultdict(list)
-    stamps = set()
+    stamps: list[JobStamp] = []
     with open(root / "docs" / "results.csv", newline="") as f:
         for row in csv.DictReader(f):
             if row["regime"] == "table" and row["agent"] in HEADLINE_AGENTS:
                 by_cell[int(row["evs"]), row["agent"]].append(float(row["mean_travel_time"]))
-                stamps.add(tuple(row.get(k) or NOT_RECORDED for k in ("environment", "evcd", "commit")))
+                fields = ("environment", "evcd", "commit", "machine")
+                stamps.append(JobStamp(*(row.get(k) or NOT_RECORDED for k in fields)))
     seeds = {len(v) for v in by_cell.values()}
     lines = [
         f"Mean travel time from departure to the start of charging (s), mean over {max(seeds)} seeds "
@@ -65,12 +66,9 @@ def results_headline(root: Path) -> str:
     for evs in sorted({e for e, _ in by_cell}):
         cells = [_interval(seed_interval(by_cell[evs, a])) for a in HEADLINE_AGENTS]
         lines.append(f"| {evs} | " + " | ".join(cells) + " |")
-    if len(stamps) == 1 and NOT_RECORDED not in next(iter(stamps)):
-        env, version, commit = next(iter(stamps))
-        lines += ["", f"Made with `{env}`, evcd {version}, commit `{commit}`."]
-    else:
-        lines += ["", "Its rows do not all record one environment version and commit (they were made before "
-                  "results recorded them, or by several commits): the results page names the commits."]
+    several = len({s.commit for s in stamps}) > 1
+    between = " The results page says what changed between them." if several else ""
+    lines += ["", stamp_sentence(stamps) + between]
     return "\n".join(lines)
 
 

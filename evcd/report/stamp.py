@@ -88,3 +88,34 @@ def stamp_markdown(stamps: Sequence[JobStamp], current: str) -> list[str]:
         f"- Machine: {_values(Counter(s.machine for s in stamps), total)}",
     ]
     return lines
+
+
+def _short(commit: str) -> str:
+    """A full hash shortened to git's 7 characters (other values, ``not recorded``, kept whole)."""
+    head, _, rest = commit.partition(" ")
+    if len(head) == 40 and all(c in "0123456789abcdef" for c in head):
+        return " ".join(filter(None, (head[:7], rest)))
+    return commit
+
+
+def _counted(counts: Counter[str], total: int) -> str:
+    """One value as is; several with their job counts, most jobs first (``a (69 of 90 jobs), b (11)``)."""
+    if len(counts) == 1:
+        return f"`{next(iter(counts))}`"
+    ranked = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+    parts = [f"`{v}` ({n} of {total} jobs)" if i == 0 else f"`{v}` ({n})" for i, (v, n) in enumerate(ranked)]
+    return ", ".join(parts[:-1]) + " and " + parts[-1]
+
+
+def stamp_sentence(stamps: Sequence[JobStamp]) -> str:
+    """The jobs' provenance in one sentence, for a headline: the environment, evcd's version, the
+    machine and the commits (shortened), each field's values with their job counts where the jobs
+    differ."""
+    total = len(stamps)
+    commits = Counter(_short(s.commit) for s in stamps)
+    return (
+        f"Made with {_counted(Counter(s.environment for s in stamps), total)}, evcd "
+        f"{_counted(Counter(s.evcd for s in stamps), total)}, on "
+        f"{_counted(Counter(s.machine for s in stamps), total)}, by "
+        f"{'commit' if len(commits) == 1 else 'commits'} {_counted(commits, total)}."
+    )

@@ -3,7 +3,7 @@ version and commit, the machine; jobs of older code read "not recorded" and the 
 
 from __future__ import annotations
 
-from evcd.report.stamp import NOT_RECORDED, JobStamp, job_stamp, stamp_markdown
+from evcd.report.stamp import NOT_RECORDED, JobStamp, job_stamp, stamp_markdown, stamp_sentence
 
 TODAY = "evcd/ChargingNav-v1"
 MACHINE = {"cpu": "AMD EPYC 7B13", "cpu_capability": "AVX2", "packages": {"torch": "2.13.0"}}
@@ -43,3 +43,13 @@ def test_older_or_unrecorded_jobs_are_said_first_with_their_counts():
     text = "\n".join(lines)
     assert f"`{NOT_RECORDED}` (1 of 3 jobs)" in text and "`evcd/ChargingNav-v0` (1 of 3 jobs)" in text
     assert f"`{'b' * 40}` (1 of 3 jobs)" in text
+
+
+def test_a_headline_stamp_counts_the_commits_most_jobs_first_and_shortens_them():
+    stamps = [job_stamp(record(commit="b" * 40))] + [job_stamp(record())] * 2 + [job_stamp({})]
+    sentence = stamp_sentence(stamps)
+    assert sentence.startswith(f"Made with `{TODAY}` (3 of 4 jobs) and `{NOT_RECORDED}` (1), evcd ")
+    assert sentence.endswith(f"by commits `aaaaaaa` (2 of 4 jobs), `bbbbbbb` (1) and `{NOT_RECORDED}` (1).")
+    one = stamp_sentence([job_stamp(record(dirty=True))])
+    assert one == (f"Made with `{TODAY}`, evcd `0.1.0`, on `AMD EPYC 7B13 (AVX2), torch 2.13.0`, "
+                   "by commit `aaaaaaa + uncommitted changes`.")  # fmt: skip
