@@ -12,16 +12,20 @@ from __future__ import annotations
 
 import csv
 from collections import defaultdict
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from evcd.report.markdown import markdown_table, signed
 from evcd.report.seed_stats import SeedStat, seed_interval
+from evcd.report.stamp import NOT_RECORDED, JobStamp, stamp_sentence
 
 CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
 #: The table's dispatchers, in the page's order.
 DISPATCHERS = ("greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
 LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
+#: The csv's provenance columns (absent from a table made before results recorded them).
+STAMP_FIELDS = ("environment", "evcd", "commit", "machine")
 
 
 @dataclass(frozen=True)
@@ -34,6 +38,7 @@ class Job:
     all_travel: float
     queue_wait: float
     eval_days: tuple[str, ...]
+    stamp: JobStamp
 
 
 def read_jobs(root: Path) -> dict[float, dict[str, dict[int, Job]]]:
@@ -43,7 +48,8 @@ def read_jobs(root: Path) -> dict[float, dict[str, dict[int, Job]]]:
         for r in csv.DictReader(f):
             out[float(r["guided_share"])][r["agent"]][int(r["seed"])] = Job(
                 int(r["guided"]), int(r["truncated"]), float(r["guided_travel"]), float(r["all_travel"]),
-                float(r["queue_wait"]), tuple(r["eval_days"].split()))  # fmt: skip
+                float(r["queue_wait"]), tuple(r["eval_days"].split()),
+                JobStamp(*(r.get(k) or NOT_RECORDED for k in STAMP_FIELDS)))  # fmt: skip
     return out
 
 
@@ -71,6 +77,11 @@ def _marked(stat: SeedStat) -> str:
     """The difference, in bold where its interval leaves out 0."""
     text = _signed(stat)
     return f"**{text}**" if stat.low > 0 or stat.high < 0 else text
+
+
+def _made(shares: Iterable[dict[str, dict[int, Job]]]) -> str:
+    """The provenance sentence of the jobs of these shares (every dispatcher's, every seed's)."""
+    return stamp_sentence([j.stamp for jobs in shares for by_seed in jobs.values() for j in by_seed.values()])
 
 
 def _share(share: float) -> str:
@@ -115,7 +126,7 @@ def share_one(root: Path) -> str:
     )
     means = markdown_table(["guided EVs' mean travel time (s)", *DISPATCHERS], rows)
     differences = markdown_table(["", "- queue_aware", "- reservation", "- central"], pairs)
-    return "\n".join([*means, "", caption, "", *differences])
+    return "\n".join([*means, "", caption, "", *differences, "", _made([jobs])])
 
 
 def per_share(root: Path) -> str:
@@ -139,4 +150,5 @@ def per_share(root: Path) -> str:
                       "(Guided EVs' mean travel time, s, mean over seeds; intervals in `fleet_results.md`.) "
                       "Paired on the same episodes (per seed the mean over its episodes, t interval across "
                       "seeds; bold: the interval leaves out 0; the episodes each side won: "
-                      "`fleet_results.md`):", "", *markdown_table(pair_header, pairs)])  # fmt: skip
+                      "`fleet_results.md`):", "", *markdown_table(pair_header, pairs), "",
+                      _made(shares.values())])  # fmt: skip

@@ -110,7 +110,9 @@ def _counted(counts: Counter[str], total: int) -> str:
 def stamp_sentence(stamps: Sequence[JobStamp]) -> str:
     """The jobs' provenance in one sentence, for a headline: the environment, evcd's version, the
     machine and the commits (shortened), each field's values with their job counts where the jobs
-    differ."""
+    differ; a sentence that says so where no job recorded any of them (made by older code)."""
+    if all(s == JobStamp() for s in stamps):
+        return "Its jobs recorded no environment version, code or machine (made before results did)."
     total = len(stamps)
     commits = Counter(_short(s.commit) for s in stamps)
     return (

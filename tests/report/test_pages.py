@@ -112,3 +112,27 @@ def test_a_malformed_page_exits_2_and_writes_nothing(tmp_path):
     proc = run_script("render_pages.py", "--root", str(root))
     assert proc.returncode == 2 and "never closed" in proc.stderr
     assert (root / "README.md").read_text() == broken
+
+
+def test_the_fleet_tables_say_which_code_and_machine_made_their_rows(tmp_path):
+    """The committed table was made before results recorded their provenance, and says so; a table
+    whose csv has the provenance columns names them with their job counts."""
+    from evcd.report.fleet_regions import per_share, share_one
+
+    root = _copy_root(tmp_path)
+    assert share_one(root).splitlines()[-1] == ("Its jobs recorded no environment version, code or machine "
+                                                "(made before results did).")
+    path = root / "docs" / "fleet_table" / "fleet_results.csv"
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for i, r in enumerate(rows):
+        r.update(environment="evcd_fleet_v1", evcd="0.1.0", machine="AMD EPYC (AVX512), torch 2.13.0+cpu",
+                 commit=("a" if float(r["guided_share"]) == 1.0 else "b" if i % 2 else "c") * 40)  # fmt: skip
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    assert share_one(root).endswith("on `AMD EPYC (AVX512), torch 2.13.0+cpu`, by commit `aaaaaaa`.")
+    last = per_share(root).splitlines()[-1]
+    assert last.startswith("Made with `evcd_fleet_v1`, evcd `0.1.0`, on ")
+    assert "by commits `aaaaaaa` (30 of 90 jobs), " in last
