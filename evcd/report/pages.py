@@ -11,69 +11,33 @@ A page marks a generated region with two HTML comments (invisible on the rendere
 
 and :data:`GENERATORS` maps the name to a function of the repository root that returns the region's
 Markdown from the data files committed beside the page (``docs/results.csv`` for the results table's
-headline, ``docs/fleet_table/fleet_results.csv`` for the fleet table's). :func:`render_page` replaces
+headline and paired line, :mod:`evcd.report.results_regions`; ``docs/fleet_table/fleet_results.csv``
+for the fleet table's, :mod:`evcd.report.fleet_regions`). :func:`render_page` replaces
 every region of a page; :func:`differences` compares a page with its rendering line by line and,
 inside tables, cell by cell.
 """
 
 from __future__ import annotations
 
-import csv
 import re
-from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
 
-from evcd.report import fleet_regions
-from evcd.report.seed_stats import SeedStat, seed_interval
-from evcd.report.stamp import NOT_RECORDED, JobStamp, stamp_sentence
+from evcd.report import fleet_regions, results_regions
 
 BEGIN = re.compile(r"^<!-- generated: ([a-z0-9-]+) -->$")
 END = "<!-- end generated -->"
 #: The pages that hold generated regions, relative to the repository root.
 PAGES = ("README.md", "docs/FLEET.md")
-#: The headline table's columns, in the results page's order.
-HEADLINE_AGENTS = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
 
 
 class PageError(ValueError):
     """A page's generated regions are malformed (unclosed, nested, unknown name)."""
 
 
-def _interval(stat: SeedStat) -> str:
-    return f"{stat.mean:.1f} [{stat.low:.1f}, {stat.high:.1f}]"
-
-
-def results_headline(root: Path) -> str:
-    """The results table's headline: mean travel time per EV count and dispatcher over the seeds of
-    ``docs/results.csv`` (the table's regime), with the 95% Student-t interval across seeds."""
-    by_cell: dict[tuple[int, str], list[float]] = defaultdict(list)
-    stamps: list[JobStamp] = []
-    with open(root / "docs" / "results.csv", newline="") as f:
-        for row in csv.DictReader(f):
-            if row["regime"] == "table" and row["agent"] in HEADLINE_AGENTS:
-                by_cell[int(row["evs"]), row["agent"]].append(float(row["mean_travel_time"]))
-                fields = ("environment", "evcd", "commit", "machine")
-                stamps.append(JobStamp(*(row.get(k) or NOT_RECORDED for k in fields)))
-    seeds = {len(v) for v in by_cell.values()}
-    lines = [
-        f"Mean travel time from departure to the start of charging (s), mean over {max(seeds)} seeds "
-        "[95% Student-t interval across seeds], in the paper's world:",
-        "",
-        "| EVs | " + " | ".join(HEADLINE_AGENTS) + " |",
-        "|---|" + "---:|" * len(HEADLINE_AGENTS),
-    ]
-    for evs in sorted({e for e, _ in by_cell}):
-        cells = [_interval(seed_interval(by_cell[evs, a])) for a in HEADLINE_AGENTS]
-        lines.append(f"| {evs} | " + " | ".join(cells) + " |")
-    several = len({s.commit for s in stamps}) > 1
-    between = " The results page says what changed between them." if several else ""
-    lines += ["", stamp_sentence(stamps) + between]
-    return "\n".join(lines)
-
-
 #: Region name -> its renderer (of the repository root).
-GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_headline,
+GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regions.headline,
+                                                "results-paired": results_regions.paired,
                                                 "fleet-headline": fleet_regions.headline,
                                                 "fleet-share-one": fleet_regions.share_one,
                                                 "fleet-per-share": fleet_regions.per_share}  # fmt: skip

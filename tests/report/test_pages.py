@@ -83,8 +83,10 @@ def test_check_names_the_changed_cell_and_rendering_restores_it(tmp_path):
         writer.writerows(rows)
     check = run_script("render_pages.py", "--check", "--root", str(root))
     assert check.returncode == 1, check.stderr[-2000:]
-    (line,) = check.stdout.splitlines()
-    assert "README.md:" in line and "column 'greedy' of row '200': '475.7 [341.7, 609.7]' -> '575.7 [" in line
+    cell, paired_line = check.stdout.splitlines()  # the headline's cell; the learners' lead on greedy
+    assert "README.md:" in cell and "column 'greedy' of row '200': '475.7 [341.7, 609.7]' -> '575.7 [" in cell
+    assert "ahead of greedy at every EV count, by 309 to" in paired_line
+    assert "ahead of greedy at every EV count, by 409 to" in paired_line
     assert run_script("render_pages.py", "--root", str(root)).returncode == 0
     assert "575.7 [441.7, 709.7]" in (root / "README.md").read_text()
     assert run_script("render_pages.py", "--check", "--root", str(root)).returncode == 0
@@ -136,3 +138,27 @@ def test_the_fleet_tables_say_which_code_and_machine_made_their_rows(tmp_path):
     last = per_share(root).splitlines()[-1]
     assert last.startswith("Made with `evcd_fleet_v1`, evcd `0.1.0`, on ")
     assert "by commits `aaaaaaa` (30 of 90 jobs), " in last
+
+
+def test_the_paired_line_reads_the_verdicts_from_the_intervals(tmp_path):
+    """The README's paired line from docs/results.csv; DQN made 100 s slower at 300 EVs in every seed
+    turns its verdict there from level to behind, and the line then reads each learner apart."""
+    from evcd.report.results_regions import paired
+
+    root = _copy_root(tmp_path)
+    line = paired(root)
+    assert "both learners are level with queue_aware at 200 and 300 and behind it at 400 EVs;" in line
+    assert "both are ahead of greedy at every EV count" in line
+    csv_path = root / "docs" / "results.csv"
+    with open(csv_path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        if (r["regime"], r["agent"], r["evs"]) == ("table", "dqn", "300"):
+            r["mean_travel_time"] = str(float(r["mean_travel_time"]) + 100.0)
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    line = paired(root)
+    assert "DQN is level with queue_aware at 200 and behind it at 300 and 400 EVs; Dueling DDQN" in line
+    assert "DQN +3.3 [-0.1, +6.7] / **+111.2 [+91.3, +131.1]** / **+34.9" in line
