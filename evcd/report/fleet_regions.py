@@ -21,6 +21,8 @@ from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import NOT_RECORDED, JobStamp, stamp_sentence
 
 CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
+#: The room's tables (``scripts/reproduce.py room``): the clairvoyant bound beside the rules, by world.
+ROOM = {world: Path("docs") / "fleet_room" / world / "fleet_results.csv" for world in ("calm", "perturbed")}
 #: The table's dispatchers, in the page's order.
 DISPATCHERS = ("greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
 LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
@@ -41,10 +43,11 @@ class Job:
     stamp: JobStamp
 
 
-def read_jobs(root: Path) -> dict[float, dict[str, dict[int, Job]]]:
-    """guided share -> dispatcher -> seed -> its job, from the committed csv under ``root``."""
+def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, Job]]]:
+    """guided share -> dispatcher -> seed -> its job, from the committed csv ``table`` under ``root``
+    (the fleet table's by default)."""
     out: dict[float, dict[str, dict[int, Job]]] = defaultdict(lambda: defaultdict(dict))
-    with open(Path(root) / CSV, newline="") as f:
+    with open(Path(root) / table, newline="") as f:
         for r in csv.DictReader(f):
             out[float(r["guided_share"])][r["agent"]][int(r["seed"])] = Job(
                 int(r["guided"]), int(r["truncated"]), float(r["guided_travel"]), float(r["all_travel"]),
@@ -152,3 +155,22 @@ def per_share(root: Path) -> str:
                       "seeds; bold: the interval leaves out 0; the episodes each side won: "
                       "`fleet_results.md`):", "", *markdown_table(pair_header, pairs), "",
                       _made(shares.values())])  # fmt: skip
+
+
+def room(root: Path) -> str:
+    """The README's line on the room ``central`` leaves: ``central`` minus the played plan (the
+    clairvoyant dispatcher, :mod:`evcd.loops.fleet_bound`) per guided EV, calm and perturbed, at the
+    highest and the lowest guided share."""
+    worlds = {world: read_jobs(root, table) for world, table in ROOM.items()}
+    top, low = max(worlds["calm"]), min(worlds["calm"])
+    at_top = []
+    for world, shares in worlds.items():
+        room_ = paired(shares[top], "central", "fleet_bound")
+        part = room_.mean / _mean(shares[top]["central"], "guided_travel")
+        at_top.append(f"{_signed(room_)} {world} ({part:.0%} of central's time)")
+    lows = [f"{signed(paired(worlds[w][low], 'central', 'fleet_bound').mean)} {w}" for w in worlds]
+    seeds = len(worlds["calm"][top]["central"])
+    return (f"- How much room central leaves on the fleet, per guided EV: central minus a dispatcher that "
+            f"knows the future, played in SUMO on the same episodes (600 EVs, guided share {_share(top)}, "
+            f"{seeds} seeds; s, mean over seeds [95% t]): {' and '.join(at_top)}; at guided share "
+            f"{_share(low)}, {' and '.join(lows)} ([`docs/FLEET.md`](docs/FLEET.md)).")  # fmt: skip

@@ -40,7 +40,8 @@ GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regi
                                                 "results-paired": results_regions.paired,
                                                 "fleet-headline": fleet_regions.headline,
                                                 "fleet-share-one": fleet_regions.share_one,
-                                                "fleet-per-share": fleet_regions.per_share}  # fmt: skip
+                                                "fleet-per-share": fleet_regions.per_share,
+                                                "fleet-room": fleet_regions.room}  # fmt: skip
 
 
 def regions(text: str) -> list[tuple[str, int, int]]:

@@ -58,6 +58,20 @@ def test_the_fleet_tables_recount_the_committed_rows():
     assert wait_row[1] == f"{sum(waits) / len(waits):.1f}"
 
 
+def test_the_room_line_pairs_central_with_the_played_plan_by_seed():
+    """One number recomputed by hand from docs/fleet_room/perturbed/fleet_results.csv: central minus
+    the played plan (agent fleet_bound) at guided share 1."""
+    by_agent: dict[str, dict[str, float]] = {"central": {}, "fleet_bound": {}}
+    with open(ROOT / "docs" / "fleet_room" / "perturbed" / "fleet_results.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["agent"] in by_agent and float(r["guided_share"]) == 1.0:
+                by_agent[r["agent"]][r["seed"]] = float(r["guided_travel"])
+    diffs = [by_agent["central"][s] - by_agent["fleet_bound"][s] for s in by_agent["central"]]
+    assert len(diffs) == 5
+    line = next(x for x in (ROOT / "README.md").read_text().splitlines() if x.startswith("- How much room "))
+    assert f"and {sum(diffs) / 5:+.1f} [" in line and "] perturbed (" in line
+
+
 def _copy_root(tmp_path: Path) -> Path:
     root = tmp_path / "repo"
     (root / "docs").mkdir(parents=True)
@@ -66,6 +80,10 @@ def _copy_root(tmp_path: Path) -> Path:
     shutil.copy(ROOT / "docs" / "results.csv", root / "docs" / "results.csv")
     (root / "docs" / "fleet_table").mkdir()
     shutil.copy(ROOT / "docs" / "fleet_table" / "fleet_results.csv", root / "docs" / "fleet_table")
+    for world in ("calm", "perturbed"):
+        room = Path("docs") / "fleet_room" / world
+        (root / room).mkdir(parents=True)
+        shutil.copy(ROOT / room / "fleet_results.csv", root / room)
     return root
 
 
