@@ -1,23 +1,28 @@
-"""The fleet table's numbers on the documentation pages, rendered from ``docs/fleet_table/fleet_results.csv``.
+"""The fleet's numbers on the documentation pages, rendered from ``docs/fleet_table/fleet_results.csv``
+and the room's tables (``docs/fleet_room/<world>/fleet_results.csv``).
 
 Each function takes the repository root and returns a generated region's Markdown
-(:mod:`evcd.report.pages`): the README's headline, and the fleet page's tables at the highest
-competition and per guided share. The csv holds one row per job; every dispatcher of a seed plays the
-same fleet episodes, so a difference paired by episode within a seed is the difference of the two jobs'
-means, and the paired rows here (the mean over seeds of those differences, with the 95% Student-t
-interval across seeds) are those of ``fleet_results.md``, which also counts the episodes each side won.
+(:mod:`evcd.report.pages`): the README's headline and room line, the fleet page's tables at the highest
+competition and per guided share, and its shares of the greedy -> bound gap. A csv holds one row per job;
+every dispatcher of a seed plays the same fleet episodes, so a difference paired by episode within a seed
+is the difference of the two jobs' means, and the paired rows here (the mean over seeds of those
+differences, with the 95% Student-t interval across seeds) are those of ``fleet_results.md``, which also
+counts the episodes each side won.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from evcd.report.markdown import markdown_table, signed
-from evcd.report.seed_stats import SeedStat, seed_interval
+from evcd.report.seed_stats import GapShare, SeedStat, gap_share, seed_interval
 from evcd.report.stamp import NOT_RECORDED, JobStamp, stamp_sentence
 
 CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
@@ -41,6 +46,7 @@ class Job:
     queue_wait: float
     eval_days: tuple[str, ...]
     stamp: JobStamp
+    bound: float  # a fleet_bound job's proven bound (NaN for the others, and in tables without the column)
 
 
 def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, Job]]]:
@@ -52,7 +58,8 @@ def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, 
             out[float(r["guided_share"])][r["agent"]][int(r["seed"])] = Job(
                 int(r["guided"]), int(r["truncated"]), float(r["guided_travel"]), float(r["all_travel"]),
                 float(r["queue_wait"]), tuple(r["eval_days"].split()),
-                JobStamp(*(r.get(k) or NOT_RECORDED for k in STAMP_FIELDS)))  # fmt: skip
+                JobStamp(*(r.get(k) or NOT_RECORDED for k in STAMP_FIELDS)),
+                float(r.get("bound") or "nan"))  # fmt: skip
     return out
 
 
@@ -174,3 +181,35 @@ def room(root: Path) -> str:
             f"knows the future, played in SUMO on the same episodes (600 EVs, guided share {_share(top)}, "
             f"{seeds} seeds; s, mean over seeds [95% t]): {' and '.join(at_top)}; at guided share "
             f"{_share(low)}, {' and '.join(lows)} ([`docs/FLEET.md`](docs/FLEET.md)).")  # fmt: skip
+
+
+def _gap_text(gap: GapShare) -> str:
+    """A share of the gap with its interval (none for one seed), or ``no room``."""
+    if not gap.room:
+        return "no room"
+    return f"{gap.share:.2f}" + (f" [{gap.low:.2f}, {gap.high:.2f}]" if math.isfinite(gap.low) else "")
+
+
+def room_shares(root: Path) -> str:
+    """The fleet page's table of the share of the greedy -> proven bound gap each dispatcher closes, per
+    guided share, calm: ``central`` and the played plan from the room's table, the fleet table's
+    learners and ``queue_aware`` on the same episodes (the seed means; a paired bootstrap over seeds
+    drawn from one generator of seed 0, in the table's order)."""
+    room, table = read_jobs(root, ROOM["calm"]), read_jobs(root)
+    shares = sorted(room, reverse=True)
+    rows = {"central": (room, "central"), "played plan": (room, "fleet_bound"),
+            **{a: (table, a) for a in ("dqn", "dueling_ddqn", "queue_aware")}}  # fmt: skip
+    rng = np.random.default_rng(0)
+    cells: dict[str, list[str]] = {name: [] for name in rows}
+    for share in shares:
+        greedy = {s: j.guided_travel for s, j in room[share]["greedy"].items()}
+        bound = {s: j.bound for s, j in room[share]["fleet_bound"].items()}
+        for name, (jobs, agent) in rows.items():
+            mine = {s: j.guided_travel for s, j in jobs[share][agent].items()}
+            cells[name].append(_gap_text(gap_share(greedy, mine, bound, rng)))
+    header = ["share of the gap closed", *(f"guided share {_share(s)}" for s in shares)]
+    return "\n".join([*markdown_table(header, [[n, *c] for n, c in cells.items()]), "",
+                      "(G - A) / (G - B) of the seed means, G greedy, B the proven bound, A the dispatcher "
+                      "[95% paired bootstrap interval over seeds]; `central` and the played plan from the "
+                      "room's table, the learners and `queue_aware` from the fleet table, on the same "
+                      "episodes."])  # fmt: skip

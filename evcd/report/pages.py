@@ -41,7 +41,8 @@ GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regi
                                                 "fleet-headline": fleet_regions.headline,
                                                 "fleet-share-one": fleet_regions.share_one,
                                                 "fleet-per-share": fleet_regions.per_share,
-                                                "fleet-room": fleet_regions.room}  # fmt: skip
+                                                "fleet-room": fleet_regions.room,
+                                                "fleet-room-shares": fleet_regions.room_shares}  # fmt: skip
 
 
 def regions(text: str) -> list[tuple[str, int, int]]:

@@ -180,3 +180,21 @@ def test_the_paired_line_reads_the_verdicts_from_the_intervals(tmp_path):
     line = paired(root)
     assert "DQN is level with queue_aware at 200 and behind it at 300 and 400 EVs; Dueling DDQN" in line
     assert "DQN +3.3 [-0.1, +6.7] / **+111.2 [+91.3, +131.1]** / **+34.9" in line
+
+
+def test_the_gap_shares_are_those_of_the_seed_means():
+    """One share recomputed by hand: DQN (fleet table) at guided share 1, against greedy and the proven
+    bound of the room's calm table."""
+    means: dict[str, list[float]] = {"greedy": [], "bound": [], "dqn": []}
+    with open(ROOT / "docs" / "fleet_room" / "calm" / "fleet_results.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if float(r["guided_share"]) == 1.0 and r["agent"] in ("greedy", "fleet_bound"):
+                means["greedy" if r["agent"] == "greedy" else "bound"].append(
+                    float(r["guided_travel" if r["agent"] == "greedy" else "bound"]))
+    with open(ROOT / "docs" / "fleet_table" / "fleet_results.csv", newline="") as f:
+        means["dqn"] = [float(r["guided_travel"]) for r in csv.DictReader(f)
+                        if float(r["guided_share"]) == 1.0 and r["agent"] == "dqn"]  # fmt: skip
+    g, b, a = (sum(v) / len(v) for v in (means["greedy"], means["bound"], means["dqn"]))
+    assert all(len(v) == 5 for v in means.values())
+    row = next(x for x in (ROOT / "docs" / "FLEET.md").read_text().splitlines() if x.startswith("| dqn | 0."))
+    assert row.split(" | ")[1].startswith(f"{(g - a) / (g - b):.2f} [")
