@@ -112,6 +112,20 @@ def headline(root: Path) -> str:
             "([`docs/FLEET.md`](docs/FLEET.md)).")  # fmt: skip
 
 
+def _per_seed(jobs: dict[str, dict[int, Job]]) -> str:
+    """Dueling DDQN minus DQN, and each learner minus ``queue_aware`` seed by seed with the seeds it is
+    faster on."""
+    seeds = sorted(set(jobs["queue_aware"]))
+    parts = []
+    for a, name in LEARNERS.items():
+        rule = jobs["queue_aware"]
+        diffs = [jobs[a][s].guided_travel - rule[s].guided_travel for s in seeds if s in jobs[a]]
+        faster = sum(d < 0 for d in diffs)
+        parts.append(f"{name} {' / '.join(signed(d) for d in diffs)} (faster on {faster} of {len(diffs)})")
+    return (f"Dueling DDQN - DQN: {_signed(paired(jobs, 'dueling_ddqn', 'dqn'))}. Per seed "
+            f"({', '.join(map(str, seeds))}), learner - queue_aware (s): {'; '.join(parts)}.")
+
+
 def share_one(root: Path) -> str:
     """The fleet page's table at the highest competition (share 1): per dispatcher the guided EVs' mean
     travel time over seeds, everybody's, the truncated guided EVs and the mean queue wait; then each
@@ -136,7 +150,7 @@ def share_one(root: Path) -> str:
     )
     means = markdown_table(["guided EVs' mean travel time (s)", *DISPATCHERS], rows)
     differences = markdown_table(["", "- queue_aware", "- reservation", "- central"], pairs)
-    return "\n".join([*means, "", caption, "", *differences, "", _made([jobs])])
+    return "\n".join([*means, "", caption, "", *differences, "", _per_seed(jobs), "", _made([jobs])])
 
 
 def per_share(root: Path) -> str:

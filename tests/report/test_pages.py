@@ -56,6 +56,10 @@ def test_the_fleet_tables_recount_the_committed_rows():
     wait_row = next(x for x in lines if x.startswith("| mean queue wait (s)")).split(" | ")
     assert truncated_row[3] == str(truncated)  # greedy, queue_aware, reservation
     assert wait_row[1] == f"{sum(waits) / len(waits):.1f}"
+    by_seed = {(r["agent"], r["seed"]): float(r["guided_travel"]) for r in rows}
+    seed_line = next(x for x in lines if x.startswith("Dueling DDQN - DQN: "))
+    first = by_seed["dqn", "0"] - by_seed["queue_aware", "0"]
+    assert f"learner - queue_aware (s): DQN {first:+.1f} / " in seed_line
 
 
 def test_the_room_line_pairs_central_with_the_played_plan_by_seed():
