@@ -153,6 +153,14 @@ def share_one(root: Path) -> str:
     return "\n".join([*means, "", caption, "", *differences, "", _per_seed(jobs), "", _made([jobs])])
 
 
+def _against_reservation(shares: dict[float, dict[str, dict[int, Job]]]) -> str:
+    """Each learner minus ``reservation`` per guided share."""
+    cells = [f"{' / '.join(_marked(paired(shares[s], a, 'reservation')) for a in LEARNERS)} at {_share(s)}"
+             for s in sorted(shares, reverse=True)]  # fmt: skip
+    names = " / ".join(LEARNERS.values())
+    return f"{names} minus reservation (s, mean over seeds [95% t]; bold as above): {'; '.join(cells)}."
+
+
 def per_share(root: Path) -> str:
     """The fleet page's table per guided share: each dispatcher's guided EVs' mean travel time over seeds
     (with its truncated guided EVs), then the learners and ``central`` paired with the rules."""
@@ -175,7 +183,7 @@ def per_share(root: Path) -> str:
                       "Paired on the same episodes (per seed the mean over its episodes, t interval across "
                       "seeds; bold: the interval leaves out 0; the episodes each side won: "
                       "`fleet_results.md`):", "", *markdown_table(pair_header, pairs), "",
-                      _made(shares.values())])  # fmt: skip
+                      _against_reservation(shares), "", _made(shares.values())])  # fmt: skip
 
 
 def room(root: Path) -> str:
