@@ -22,8 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from evcd.report.markdown import markdown_table, signed
+from evcd.report.markdown import marked_interval as _marked
+from evcd.report.markdown import signed_interval as _signed
 from evcd.report.seed_stats import GapShare, SeedStat, gap_share, seed_interval
-from evcd.report.stamp import NOT_RECORDED, JobStamp, stamp_sentence
+from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
 
 CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
 #: The room's tables (``scripts/reproduce.py room``): the clairvoyant bound beside the rules, by world.
@@ -31,8 +33,6 @@ ROOM = {world: Path("docs") / "fleet_room" / world / "fleet_results.csv" for wor
 #: The table's dispatchers, in the page's order.
 DISPATCHERS = ("greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
 LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
-#: The csv's provenance columns (absent from a table made before results recorded them).
-STAMP_FIELDS = ("environment", "evcd", "commit", "machine")
 
 
 @dataclass(frozen=True)
@@ -58,8 +58,7 @@ def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, 
             out[float(r["guided_share"])][r["agent"]][int(r["seed"])] = Job(
                 int(r["guided"]), int(r["truncated"]), float(r["guided_travel"]), float(r["all_travel"]),
                 float(r["queue_wait"]), tuple(r["eval_days"].split()),
-                JobStamp(*(r.get(k) or NOT_RECORDED for k in STAMP_FIELDS)),
-                float(r.get("bound") or "nan"))  # fmt: skip
+                row_stamp(r), float(r.get("bound") or "nan"))  # fmt: skip
     return out
 
 
@@ -77,16 +76,6 @@ def _mean(jobs: dict[int, Job], field: str) -> float:
 def _total(jobs: dict[int, Job], field: str) -> int:
     """The sum over seeds of a job count."""
     return sum(int(getattr(j, field)) for j in jobs.values())
-
-
-def _signed(stat: SeedStat) -> str:
-    return f"{signed(stat.mean)} [{signed(stat.low)}, {signed(stat.high)}]"
-
-
-def _marked(stat: SeedStat) -> str:
-    """The difference, in bold where its interval leaves out 0."""
-    text = _signed(stat)
-    return f"**{text}**" if stat.low > 0 or stat.high < 0 else text
 
 
 def _made(shares: Iterable[dict[str, dict[int, Job]]]) -> str:
@@ -116,9 +105,8 @@ def _per_seed(jobs: dict[str, dict[int, Job]]) -> str:
     """Dueling DDQN minus DQN, and each learner minus ``queue_aware`` seed by seed with the seeds it is
     faster on."""
     seeds = sorted(set(jobs["queue_aware"]))
-    parts = []
+    parts, rule = [], jobs["queue_aware"]
     for a, name in LEARNERS.items():
-        rule = jobs["queue_aware"]
         diffs = [jobs[a][s].guided_travel - rule[s].guided_travel for s in seeds if s in jobs[a]]
         faster = sum(d < 0 for d in diffs)
         parts.append(f"{name} {' / '.join(signed(d) for d in diffs)} (faster on {faster} of {len(diffs)})")

@@ -29,6 +29,17 @@ def format_stat(stat: SeedStat, digits: int = 1, sign: bool = False) -> str:
     return f"{show(stat.mean, digits)} [{show(stat.low, digits)}, {show(stat.high, digits)}] n={stat.n}"
 
 
+def signed_interval(stat: SeedStat) -> str:
+    """A difference over seeds: ``+1.2 [-0.3, +2.7]``."""
+    return f"{signed(stat.mean)} [{signed(stat.low)}, {signed(stat.high)}]"
+
+
+def marked_interval(stat: SeedStat) -> str:
+    """:func:`signed_interval`, in bold where the interval leaves out 0."""
+    text = signed_interval(stat)
+    return f"**{text}**" if stat.low > 0 or stat.high < 0 else text
+
+
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
     """A Markdown table: the first column left-aligned, the others right-aligned."""
     rule = "|---|" + "---:|" * (len(header) - 1)

@@ -15,16 +15,14 @@ import csv
 from collections import defaultdict
 from pathlib import Path
 
-from evcd.report.markdown import signed
+from evcd.report.markdown import marked_interval as _marked
 from evcd.report.seed_stats import SeedStat, seed_interval
-from evcd.report.stamp import NOT_RECORDED, JobStamp, stamp_sentence
+from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
 
 CSV = Path("docs") / "results.csv"
 #: The headline table's columns, in the results page's order.
 HEADLINE_AGENTS = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
 LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
-#: The csv's provenance columns.
-STAMP_FIELDS = ("environment", "evcd", "commit", "machine")
 
 
 def read_table(root: Path) -> tuple[dict[tuple[int, str], dict[int, float]], list[JobStamp]]:
@@ -36,7 +34,7 @@ def read_table(root: Path) -> tuple[dict[tuple[int, str], dict[int, float]], lis
         for row in csv.DictReader(f):
             if row["regime"] == "table" and row["agent"] in HEADLINE_AGENTS:
                 cells[int(row["evs"]), row["agent"]][int(row["seed"])] = float(row["mean_travel_time"])
-                stamps.append(JobStamp(*(row.get(k) or NOT_RECORDED for k in STAMP_FIELDS)))
+                stamps.append(row_stamp(row))
     return cells, stamps
 
 
@@ -69,12 +67,6 @@ def difference(cells: dict[tuple[int, str], dict[int, float]], evs: int, a: str,
     """``a`` minus ``b`` at ``evs`` EVs, paired by seed, over the seeds both have."""
     seeds = sorted(set(cells[evs, a]) & set(cells[evs, b]))
     return seed_interval(cells[evs, a][s] - cells[evs, b][s] for s in seeds)
-
-
-def _marked(stat: SeedStat) -> str:
-    """The difference with its interval, in bold where the interval leaves out 0."""
-    text = f"{signed(stat.mean)} [{signed(stat.low)}, {signed(stat.high)}]"
-    return f"**{text}**" if stat.low > 0 or stat.high < 0 else text
 
 
 def _verdict(stat: SeedStat) -> str:

@@ -60,6 +60,16 @@ def job_stamp(data: Mapping[str, Any]) -> JobStamp:
     )
 
 
+#: The provenance columns of a table's csv (absent from one made before results recorded them).
+STAMP_COLUMNS = ("environment", "evcd", "commit", "machine")
+
+
+def row_stamp(row: Mapping[str, str]) -> JobStamp:
+    """The :class:`JobStamp` of a csv row with the :data:`STAMP_COLUMNS` (:data:`NOT_RECORDED` where a
+    column is missing or empty)."""
+    return JobStamp(*(row.get(k) or NOT_RECORDED for k in STAMP_COLUMNS))
+
+
 def _values(counts: Counter[str], total: int) -> str:
     if len(counts) == 1:
         return f"`{next(iter(counts))}`"

@@ -31,13 +31,19 @@ def test_the_headline_is_the_mean_over_seeds_of_the_committed_rows():
     assert f"| {sum(values) / 5:.1f} [" in readme.split("| 400 |")[1].split("\n")[0]
 
 
-def test_the_fleet_headline_pairs_the_committed_rows_by_seed():
-    """One cell recomputed by hand from docs/fleet_table/fleet_results.csv: DQN - central at share 1."""
-    by_agent: dict[str, dict[str, float]] = {"dqn": {}, "central": {}}
-    with open(ROOT / "docs" / "fleet_table" / "fleet_results.csv", newline="") as f:
+def _share_one(path: Path, *agents: str) -> dict[str, dict[str, float]]:
+    """agent -> seed -> the guided EVs' mean travel time at guided share 1, from a fleet csv."""
+    by_agent: dict[str, dict[str, float]] = {a: {} for a in agents}
+    with open(path, newline="") as f:
         for r in csv.DictReader(f):
             if r["agent"] in by_agent and float(r["guided_share"]) == 1.0:
                 by_agent[r["agent"]][r["seed"]] = float(r["guided_travel"])
+    return by_agent
+
+
+def test_the_fleet_headline_pairs_the_committed_rows_by_seed():
+    """One cell recomputed by hand from docs/fleet_table/fleet_results.csv: DQN - central at share 1."""
+    by_agent = _share_one(ROOT / "docs" / "fleet_table" / "fleet_results.csv", "dqn", "central")
     diffs = [by_agent["dqn"][s] - by_agent["central"][s] for s in by_agent["central"]]
     assert len(diffs) == 5
     line = next(x for x in (ROOT / "README.md").read_text().splitlines() if x.startswith("- The fleet at "))
@@ -65,11 +71,8 @@ def test_the_fleet_tables_recount_the_committed_rows():
 def test_the_room_line_pairs_central_with_the_played_plan_by_seed():
     """One number recomputed by hand from docs/fleet_room/perturbed/fleet_results.csv: central minus
     the played plan (agent fleet_bound) at guided share 1."""
-    by_agent: dict[str, dict[str, float]] = {"central": {}, "fleet_bound": {}}
-    with open(ROOT / "docs" / "fleet_room" / "perturbed" / "fleet_results.csv", newline="") as f:
-        for r in csv.DictReader(f):
-            if r["agent"] in by_agent and float(r["guided_share"]) == 1.0:
-                by_agent[r["agent"]][r["seed"]] = float(r["guided_travel"])
+    perturbed = ROOT / "docs" / "fleet_room" / "perturbed" / "fleet_results.csv"
+    by_agent = _share_one(perturbed, "central", "fleet_bound")
     diffs = [by_agent["central"][s] - by_agent["fleet_bound"][s] for s in by_agent["central"]]
     assert len(diffs) == 5
     line = next(x for x in (ROOT / "README.md").read_text().splitlines() if x.startswith("- How much room "))
