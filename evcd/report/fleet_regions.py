@@ -193,6 +193,24 @@ def room(root: Path) -> str:
             f"{_share(low)}, {' and '.join(lows)} ([`docs/FLEET.md`](docs/FLEET.md)).")  # fmt: skip
 
 
+def room_worlds(root: Path) -> str:
+    """The fleet page's line per world: ``central`` minus the played plan and minus the proven bound,
+    per guided EV, at each guided share (the mean over seeds of the seeds' differences)."""
+    lines = []
+    for world, table in ROOM.items():
+        shares = read_jobs(root, table)
+        order = sorted(shares, reverse=True)
+        plan = " / ".join(signed(paired(shares[s], "central", "fleet_bound").mean) for s in order)
+        bound = []
+        for s in order:
+            central, bounds = shares[s]["central"], shares[s]["fleet_bound"]
+            seeds = sorted(set(central) & set(bounds))
+            bound.append(signed(float(np.mean([central[k].guided_travel - bounds[k].bound for k in seeds]))))
+        lines.append(f"- {world}: {plan} to the played plan; {' / '.join(bound)} to the bound (guided shares "
+                     f"{' / '.join(map(_share, order))}).")  # fmt: skip
+    return "\n".join(lines)
+
+
 def _gap_text(gap: GapShare) -> str:
     """A share of the gap with its interval (none for one seed), or ``no room``."""
     if not gap.room:

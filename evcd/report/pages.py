@@ -42,7 +42,8 @@ GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regi
                                                 "fleet-share-one": fleet_regions.share_one,
                                                 "fleet-per-share": fleet_regions.per_share,
                                                 "fleet-room": fleet_regions.room,
-                                                "fleet-room-shares": fleet_regions.room_shares}  # fmt: skip
+                                                "fleet-room-shares": fleet_regions.room_shares,
+                                                "fleet-room-worlds": fleet_regions.room_worlds}  # fmt: skip
 
 
 def regions(text: str) -> list[tuple[str, int, int]]:

@@ -205,3 +205,17 @@ def test_the_gap_shares_are_those_of_the_seed_means():
     assert all(len(v) == 5 for v in means.values())
     row = next(x for x in (ROOT / "docs" / "FLEET.md").read_text().splitlines() if x.startswith("| dqn | 0."))
     assert row.split(" | ")[1].startswith(f"{(g - a) / (g - b):.2f} [")
+
+
+def test_the_line_per_world_subtracts_the_proven_bound_seed_by_seed():
+    """central minus the proven bound at guided share 1, calm, recomputed by hand from the room's csv."""
+    central, bound = {}, {}
+    with open(ROOT / "docs" / "fleet_room" / "calm" / "fleet_results.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if float(r["guided_share"]) == 1.0 and r["agent"] == "central":
+                central[r["seed"]] = float(r["guided_travel"])
+            elif float(r["guided_share"]) == 1.0 and r["agent"] == "fleet_bound":
+                bound[r["seed"]] = float(r["bound"])
+    diff = sum(central[s] - bound[s] for s in central) / len(central)
+    line = next(x for x in (ROOT / "docs" / "FLEET.md").read_text().splitlines() if x.startswith("- calm: "))
+    assert f"to the played plan; {diff:+.1f} / " in line
