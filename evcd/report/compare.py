@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from evcd.loops.run_files import EVAL_CSV, FLEET_CSV, RESULTS_JSON, baseline_csv, read_episodes_csv
-from evcd.report.markdown import markdown_table
+from evcd.report.markdown import interval, markdown_table
 from evcd.report.paired import PairedStat, paired_cell, paired_stat, per_seed_text
 from evcd.report.seed_stats import seed_interval
 from evcd.report.sweep import world_label
@@ -90,7 +90,7 @@ class Runs:
         seeds."""
         per_seed = [np.nanmean(list(t.values())) for t in self.travel[row].values()]
         stat = seed_interval(per_seed)
-        text = f"{stat.mean:.1f} [{stat.low:.1f}, {stat.high:.1f}]" if stat.n > 1 else f"{stat.mean:.1f}"
+        text = interval(stat) if stat.n > 1 else f"{stat.mean:.1f}"
         return text, stat.n
 
     def paired(self, a: Row, b: Row) -> PairedStat | None:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from evcd.report.markdown import markdown_table, signed
+from evcd.report.markdown import interval, markdown_table, signed
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.markdown import signed_interval as _signed
 from evcd.report.seed_stats import GapShare, SeedStat, gap_share, seed_interval
@@ -124,7 +124,7 @@ def share_one(root: Path) -> str:
     rows = [
         [
             "mean over seeds [95 % t interval]",
-            *(f"{s.mean:.1f} [{s.low:.1f}, {s.high:.1f}]" for s in travel.values()),
+            *map(interval, travel.values()),
         ],
         ["all EVs charging in the window", *(f"{_mean(jobs[a], 'all_travel'):.1f}" for a in DISPATCHERS)],
         [f"guided EVs truncated (of {guided:,})", *(f"{_total(jobs[a], 'truncated')}" for a in DISPATCHERS)],

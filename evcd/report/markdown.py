@@ -29,6 +29,11 @@ def format_stat(stat: SeedStat, digits: int = 1, sign: bool = False) -> str:
     return f"{show(stat.mean, digits)} [{show(stat.low, digits)}, {show(stat.high, digits)}] n={stat.n}"
 
 
+def interval(stat: SeedStat) -> str:
+    """A mean over seeds with its interval: ``303.9 [243.8, 364.0]``."""
+    return f"{stat.mean:.1f} [{stat.low:.1f}, {stat.high:.1f}]"
+
+
 def signed_interval(stat: SeedStat) -> str:
     """A difference over seeds: ``+1.2 [-0.3, +2.7]``."""
     return f"{signed(stat.mean)} [{signed(stat.low)}, {signed(stat.high)}]"

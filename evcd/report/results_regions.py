@@ -15,6 +15,7 @@ import csv
 from collections import defaultdict
 from pathlib import Path
 
+from evcd.report.markdown import interval
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
@@ -38,10 +39,6 @@ def read_table(root: Path) -> tuple[dict[tuple[int, str], dict[int, float]], lis
     return cells, stamps
 
 
-def _interval(stat: SeedStat) -> str:
-    return f"{stat.mean:.1f} [{stat.low:.1f}, {stat.high:.1f}]"
-
-
 def headline(root: Path) -> str:
     """The headline table: mean travel time per EV count and dispatcher over the seeds, with the 95%
     Student-t interval across seeds, and what made its jobs."""
@@ -55,7 +52,7 @@ def headline(root: Path) -> str:
         "|---|" + "---:|" * len(HEADLINE_AGENTS),
     ]
     for evs in sorted({e for e, _ in cells}):
-        row = [_interval(seed_interval(cells[evs, a].values())) for a in HEADLINE_AGENTS]
+        row = [interval(seed_interval(cells[evs, a].values())) for a in HEADLINE_AGENTS]
         lines.append(f"| {evs} | " + " | ".join(row) + " |")
     several = len({s.commit for s in stamps}) > 1
     between = " The results page says what changed between them." if several else ""
