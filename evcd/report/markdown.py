@@ -45,6 +45,12 @@ def marked_interval(stat: SeedStat) -> str:
     return f"**{text}**" if stat.low > 0 or stat.high < 0 else text
 
 
+def verdict(stat: SeedStat) -> str:
+    """Where ``a`` stands against ``b`` from the interval of ``a - b`` (a travel time: lower is better):
+    ``behind`` (the interval above 0), ``ahead of`` (below) or ``level with`` (it holds 0)."""
+    return "behind" if stat.low > 0 else "ahead of" if stat.high < 0 else "level with"
+
+
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
     """A Markdown table: the first column left-aligned, the others right-aligned."""
     rule = "|---|" + "---:|" * (len(header) - 1)

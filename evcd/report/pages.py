@@ -41,6 +41,8 @@ GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regi
                                                 "fleet-headline": fleet_regions.headline,
                                                 "fleet-share-one": fleet_regions.share_one,
                                                 "fleet-per-share": fleet_regions.per_share,
+                                                "fleet-against-rules": fleet_regions.against_rules,
+                                                "fleet-share-verdicts": fleet_regions.share_verdicts,
                                                 "fleet-room": fleet_regions.room,
                                                 "fleet-room-shares": fleet_regions.room_shares,
                                                 "fleet-room-worlds": fleet_regions.room_worlds}  # fmt: skip

@@ -15,7 +15,7 @@ import csv
 from collections import defaultdict
 from pathlib import Path
 
-from evcd.report.markdown import interval
+from evcd.report.markdown import interval, verdict
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
@@ -66,20 +66,15 @@ def difference(cells: dict[tuple[int, str], dict[int, float]], evs: int, a: str,
     return seed_interval(cells[evs, a][s] - cells[evs, b][s] for s in seeds)
 
 
-def _verdict(stat: SeedStat) -> str:
-    """Where ``a - b`` stands: ``behind`` (the interval above 0), ``ahead of`` (below) or ``level with``."""
-    return "behind" if stat.low > 0 else "ahead of" if stat.high < 0 else "level with"
-
-
 def _reading(by_count: dict[int, SeedStat], rule: str) -> str:
     """``level with <rule> at 200 and 300 EVs and behind it at 400``: the EV counts grouped by verdict."""
     groups: dict[str, list[int]] = {}
     for evs, stat in by_count.items():
-        groups.setdefault(_verdict(stat), []).append(evs)
+        groups.setdefault(verdict(stat), []).append(evs)
     parts = []
-    for i, (verdict, counts) in enumerate(groups.items()):
+    for i, (said, counts) in enumerate(groups.items()):
         at = ", ".join(map(str, counts[:-1])) + " and " if len(counts) > 1 else ""
-        parts.append(f"{verdict} {rule if i == 0 else 'it'} at {at}{counts[-1]}")
+        parts.append(f"{said} {rule if i == 0 else 'it'} at {at}{counts[-1]}")
     return " and ".join(parts) + " EVs"
 
 

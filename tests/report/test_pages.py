@@ -219,3 +219,44 @@ def test_the_line_per_world_subtracts_the_proven_bound_seed_by_seed():
     diff = sum(central[s] - bound[s] for s in central) / len(central)
     line = next(x for x in (ROOT / "docs" / "FLEET.md").read_text().splitlines() if x.startswith("- calm: "))
     assert f"to the played plan; {diff:+.1f} / " in line
+
+
+def _shift_fleet(root: Path, agent: str, share: float, by: float) -> None:
+    """Make ``agent``'s guided EVs ``by`` seconds slower at ``share`` in every seed of a copied fleet csv."""
+    path = root / "docs" / "fleet_table" / "fleet_results.csv"
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        if r["agent"] == agent and float(r["guided_share"]) == share:
+            r["guided_travel"] = str(float(r["guided_travel"]) + by)
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def test_the_fleet_readings_follow_the_paired_intervals(tmp_path):
+    """The fleet page's readings from the committed csv: DQN's lead on queue_aware at share 1 as a share
+    of the rule's time, recomputed by hand; DQN made 100 s slower at share 1 turns it from ahead of
+    queue_aware to behind, drops the unpaired reading, and splits the learners' line at that share."""
+    from evcd.report.fleet_regions import against_rules, share_verdicts
+
+    by_agent = _share_one(ROOT / "docs" / "fleet_table" / "fleet_results.csv", "dqn", "queue_aware")
+    rule = by_agent["queue_aware"]
+    diff = sum(by_agent["dqn"][s] - rule[s] for s in rule) / len(rule)
+    root = _copy_root(tmp_path)
+    text = against_rules(root)
+    assert f"Against queue_aware: DQN ahead of it: {diff:+.1f} [" in text
+    part = abs(diff) / (sum(rule.values()) / len(rule))
+    assert f"s, {part:.0%} of its time, faster on 5 of 5 seeds; Dueling DDQN ahead of it" in text
+    assert "the lead on queue_aware is not shown (DQN " in text
+    line = share_verdicts(root)
+    assert "at 0.5, both learners level with queue_aware and level with central;" in line
+    _shift_fleet(root, "dqn", 1.0, 100.0)
+    text = against_rules(root)
+    assert "Against queue_aware: DQN behind it: +54.8 [" in text
+    assert "the lead on queue_aware is not shown (Dueling DDQN " in text
+    line = share_verdicts(root)
+    assert "at 1, DQN behind queue_aware and behind central, Dueling DDQN ahead of queue_aware" in line
+    _shift_fleet(root, "dueling_ddqn", 1.0, 100.0)
+    assert "lead on queue_aware" not in against_rules(root)
