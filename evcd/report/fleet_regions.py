@@ -4,11 +4,11 @@ and the room's tables (``docs/fleet_room/<world>/fleet_results.csv``).
 Each function takes the repository root and returns a generated region's Markdown
 (:mod:`evcd.report.pages`): the README's headline and room line, the fleet page's tables at the highest
 competition and per guided share, its readings of where each learner stands against the rules (the
-verdicts read from the paired intervals), and its shares of the greedy -> bound gap. A csv holds one row per job;
-every dispatcher of a seed plays the same fleet episodes, so a difference paired by episode within a seed
-is the difference of the two jobs' means, and the paired rows here (the mean over seeds of those
-differences, with the 95% Student-t interval across seeds) are those of ``fleet_results.md``, which also
-counts the episodes each side won.
+verdicts read from the paired intervals), and its shares of the greedy -> bound gap. A csv holds one row
+per job; every dispatcher of a seed plays the same fleet episodes, so a difference paired by episode
+within a seed is the difference of the two jobs' means, and the paired rows here (the mean over seeds of
+those differences, with the 95% Student-t interval across seeds) are those of ``fleet_results.md``,
+which also counts the episodes each side won.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Markdown pieces of the results tables: numbers, intervals across seeds, tables."""
+"""Markdown pieces of the results tables: numbers, intervals across seeds, tables; and the tables of a
+committed page read back (a section's tables, their cells)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,8 @@ import math
 from collections.abc import Iterable, Sequence
 
 from evcd.report.seed_stats import SeedStat
+
+Table = tuple[int, list[str], list[tuple[int, list[str]]]]  # (header line, header cells, rows with lines)
 
 
 def num(x: float, digits: int = 1) -> str:
@@ -55,3 +58,54 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list
     """A Markdown table: the first column left-aligned, the others right-aligned."""
     rule = "|---|" + "---:|" * (len(header) - 1)
     return ["| " + " | ".join(header) + " |", rule, *("| " + " | ".join(r) + " |" for r in rows)]
+
+
+def _cells(line: str) -> list[str]:
+    """A table row's cells, stripped, bold marks dropped."""
+    return [c.replace("**", "").strip() for c in line.strip().strip("|").split("|")]
+
+
+def section_lines(text: str, heading: str | None) -> list[tuple[int, str]]:
+    """(line number from 1, line) of ``text``, or of its section under the line ``heading`` (to the next
+    heading of the same or a higher level; lines in fenced code blocks are never headings).
+
+    Raises:
+        ValueError: no line is ``heading``.
+    """
+    lines = list(enumerate(text.splitlines(), 1))
+    if heading is None:
+        return lines
+    fenced, start, level = False, None, 0
+    for i, (_, line) in enumerate(lines):
+        if line.startswith("```"):
+            fenced = not fenced
+            continue
+        hashes = len(line) - len(line.lstrip("#"))
+        if fenced or not hashes or not line[hashes:].startswith(" "):
+            continue
+        if start is None and line.strip() == heading.strip():
+            start, level = i + 1, hashes
+        elif start is not None and hashes <= level:
+            return lines[start:i]
+    if start is None:
+        raise ValueError(f"no heading {heading!r}")
+    return lines[start:]
+
+
+def tables(lines: Sequence[tuple[int, str]]) -> list[Table]:
+    """The Markdown tables of numbered lines: (header line, header cells, [(line, cells)])."""
+    out: list[Table] = []
+    i = 0
+    while i + 1 < len(lines):
+        (n, line), (_, rule) = lines[i], lines[i + 1]
+        if line.startswith("|") and rule.startswith("|---"):
+            rows = []
+            j = i + 2
+            while j < len(lines) and lines[j][1].startswith("|"):
+                rows.append((lines[j][0], _cells(lines[j][1])))
+                j += 1
+            out.append((n, _cells(line), rows))
+            i = j
+        else:
+            i += 1
+    return out

@@ -11,8 +11,9 @@ A page marks a generated region with two HTML comments (invisible on the rendere
 
 and :data:`GENERATORS` maps the name to a function of the repository root that returns the region's
 Markdown from the data files committed beside the page (``docs/results.csv`` for the results table's
-headline and paired line, :mod:`evcd.report.results_regions`; ``docs/fleet_table/fleet_results.csv``
-for the fleet table's, :mod:`evcd.report.fleet_regions`). :func:`render_page` replaces
+headline and paired line, and the results page's tables of the README regime for the first command's
+line, :mod:`evcd.report.results_regions`; ``docs/fleet_table/fleet_results.csv`` for the fleet table's,
+:mod:`evcd.report.fleet_regions`). :func:`render_page` replaces
 every region of a page; :func:`differences` compares a page with its rendering line by line and,
 inside tables, cell by cell.
 """
@@ -38,6 +39,7 @@ class PageError(ValueError):
 #: Region name -> its renderer (of the repository root).
 GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regions.headline,
                                                 "results-paired": results_regions.paired,
+                                                "readme-regime": results_regions.regime,
                                                 "fleet-headline": fleet_regions.headline,
                                                 "fleet-share-one": fleet_regions.share_one,
                                                 "fleet-per-share": fleet_regions.per_share,

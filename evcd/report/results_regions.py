@@ -1,26 +1,32 @@
 """The results table's numbers on the README, rendered from ``docs/results.csv``.
 
 Each function takes the repository root and returns a generated region's Markdown
-(:mod:`evcd.report.pages`): the headline table (each dispatcher's mean over seeds per EV count) and the
-line that pairs the learners with the rules. The csv holds one row per job (regime, agent, EV count,
-seed); every dispatcher of a seed and EV count is evaluated on the same episodes, so a difference
-paired by episode within a seed is the difference of the two jobs' means, and the paired numbers here
-(the mean over seeds of those differences, with the 95% Student-t interval across seeds) are those of
-the results page.
+(:mod:`evcd.report.pages`): the headline table (each dispatcher's mean over seeds per EV count), the
+line that pairs the learners with the rules, and the line on the first command's regime (read from the
+results page's tables of that regime, which ``scripts/reproduce.py readme --check`` holds to its runs).
+The csv holds one row per job (regime, agent, EV count, seed); every dispatcher of a seed and EV count
+is evaluated on the same episodes, so a difference paired by episode within a seed is the difference of
+the two jobs' means, and the paired numbers here (the mean over seeds of those differences, with the 95%
+Student-t interval across seeds) are those of the results page.
 """
 
 from __future__ import annotations
 
 import csv
+import re
 from collections import defaultdict
 from pathlib import Path
 
-from evcd.report.markdown import interval, verdict
+from evcd.report.markdown import interval, section_lines, signed_interval, tables, verdict
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
 
 CSV = Path("docs") / "results.csv"
+#: The results page, whose README-regime tables (``scripts/reproduce.py readme --check`` compares them with
+#: their runs) give the README's line on the first command's regime.
+RESULTS = Path("docs") / "RESULTS.md"
+REGIME = "### The README regime"
 #: The headline table's columns, in the results page's order.
 HEADLINE_AGENTS = ("random", "greedy", "queue_aware", "dqn", "dueling_ddqn", "hindsight")
 LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
@@ -105,3 +111,49 @@ def paired(root: Path) -> str:
     return (f"- Paired on the same episodes, {reading}; {against_greedy}. Each learner minus "
             f"queue_aware at {per} EVs (s, mean over seeds [95% t]; bold: the interval leaves out 0): "
             f"{'; '.join(rule)}. The hindsight bound minus queue_aware, the room the rule leaves: {room}.")
+
+
+def _stat(cell: str) -> SeedStat:
+    """``+2.7 [-6.0, +11.4]`` as a :class:`SeedStat` (mean, low, high; the count is not in the cell)."""
+    m = re.fullmatch(r"([-+]?[\d.]+) \[([-+]?[\d.]+), ([-+]?[\d.]+)\]", cell.replace("**", "").strip())
+    if m is None:
+        raise ValueError(f"not a mean with its interval: {cell!r}")
+    return SeedStat(*map(float, m.groups()), 0)
+
+
+def regime(root: Path) -> str:
+    """The README's line on the first command's regime, from the results page's section on it: Dueling
+    DDQN, queue_aware and greedy over seeds, Dueling DDQN minus queue_aware paired, and where the other
+    learners stand against queue_aware."""
+    text = (Path(root) / RESULTS).read_text()
+    heading = next((line for line in text.splitlines() if line.startswith(REGIME + " ")), None)
+    if heading is None:
+        raise ValueError(f"{RESULTS}: no section {REGIME!r}")
+    found = tables(section_lines(text, heading))
+    if len(found) < 2:
+        raise ValueError(f"{RESULTS}: the section {heading!r} has {len(found)} table(s), not the two "
+                         "(means per seed, paired differences) the README's line reads")  # fmt: skip
+    (_, header, rows), (_, pair_header, pair_rows) = found[:2]
+    means = {cells[0]: cells[header.index("mean over seeds [95% t]")] for _, cells in rows}
+    column = pair_header.index("- queue_aware: mean over seeds [95% t]")
+    against = {cells[0]: _stat(cells[column]) for _, cells in pair_rows}
+    seeds = sum(h.startswith("seed ") for h in header)
+    own = against.pop("dueling_ddqn")
+    said = {verdict(s) for s in against.values()}
+    if said == {"behind"}:
+        means_behind = sorted(s.mean for s in against.values())
+        others = f"which trail the rule by {means_behind[0]:.0f}-{means_behind[-1]:.0f} s"
+    else:
+        others = "; ".join(f"{a} {verdict(s)} the rule" for a, s in against.items())
+    return (f"- The first command's regime (morning peak, 400 EVs, {seeds} seeds on days 101 and 102; "
+            f"regenerated on today's code by `scripts/reproduce.py readme`): Dueling DDQN "
+            f"{_with_unit(means['dueling_ddqn'])}, queue_aware {_with_unit(means['queue_aware'])}, greedy "
+            f"{_with_unit(means['greedy'])}; paired, {verdict(own)} queue_aware ({signed_interval(own)}) "
+            f"([`docs/RESULTS.md`](docs/RESULTS.md), \"Outside algorithms\", beside evcd's PPO and "
+            f"stable-baselines3's PPO and DQN, {others}).")  # fmt: skip
+
+
+def _with_unit(cell: str) -> str:
+    """``167.2 [135.7, 198.7]`` as ``167.2 s [135.7, 198.7]``."""
+    mean, _, rest = cell.partition(" ")
+    return f"{mean} s {rest}"

@@ -85,6 +85,7 @@ def _copy_root(tmp_path: Path) -> Path:
     for page in PAGES:
         shutil.copy(ROOT / page, root / page)
     shutil.copy(ROOT / "docs" / "results.csv", root / "docs" / "results.csv")
+    shutil.copy(ROOT / "docs" / "RESULTS.md", root / "docs" / "RESULTS.md")
     (root / "docs" / "fleet_table").mkdir()
     shutil.copy(ROOT / "docs" / "fleet_table" / "fleet_results.csv", root / "docs" / "fleet_table")
     for world in ("calm", "perturbed"):
@@ -260,3 +261,25 @@ def test_the_fleet_readings_follow_the_paired_intervals(tmp_path):
     assert "at 1, DQN behind queue_aware and behind central, Dueling DDQN ahead of queue_aware" in line
     _shift_fleet(root, "dueling_ddqn", 1.0, 100.0)
     assert "lead on queue_aware" not in against_rules(root)
+
+
+def test_the_regime_line_reads_the_results_pages_tables_of_that_regime(tmp_path):
+    """The README's line on the first command's regime: Dueling DDQN's mean recomputed by hand from its
+    seeds on the results page; a learner's paired interval moved below 0 on the page changes where the
+    line says it stands; a page without the section is refused by name."""
+    from evcd.report.results_regions import RESULTS, regime
+
+    text = (ROOT / RESULTS).read_text()
+    section = text[text.index("### The README regime "):]
+    row = next(x for x in section.splitlines() if x.startswith("| dueling_ddqn | "))
+    seeds = [float(c) for c in row.split(" | ")[1:6]]
+    root = _copy_root(tmp_path)
+    line = regime(root)
+    assert f"Dueling DDQN {sum(seeds) / 5:.1f} s [" in line
+    assert "paired, level with queue_aware (+2.7 [" in line and "which trail the rule by 54-96 s" in line
+    (root / RESULTS).write_text(text.replace("| -221.8 [-360.8, -82.8] | +95.5 [+6.0, +185.1] |",
+                                             "| -221.8 [-360.8, -82.8] | -5.0 [-9.0, -1.0] |"))  # fmt: skip
+    assert "sb3_dqn ahead of the rule; sb3_ppo behind the rule" in regime(root)
+    (root / RESULTS).write_text(text.replace("### The README regime ", "### The first regime "))
+    with pytest.raises(ValueError, match="no section '### The README regime'"):
+        regime(root)

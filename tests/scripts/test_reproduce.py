@@ -31,13 +31,9 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from evcd.experiments.schema import register_configs
-from evcd.report.reproduce.check import (
-    csv_differences,
-    markdown_differences,
-    region_differences,
-    section_lines,
-)
-from evcd.report.reproduce.check import tables as md_tables
+from evcd.report.markdown import section_lines
+from evcd.report.markdown import tables as md_tables
+from evcd.report.reproduce.check import csv_differences, markdown_differences, region_differences
 from evcd.report.reproduce.found import job_groups
 from evcd.report.reproduce.launch import check_launcher
 from evcd.report.reproduce.render import log_span, log_wall

@@ -25,10 +25,9 @@ import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from evcd.report.markdown import section_lines, tables
 from evcd.report.pages import differences, render_page
 from evcd.report.reproduce.spec import Compare, Page
-
-Table = tuple[int, list[str], list[tuple[int, list[str]]]]  # (header line, header cells, rows with lines)
 
 
 # ---------------------------------------------------------------------------------------- CSV
@@ -93,56 +92,6 @@ def csv_differences(
 
 
 # ---------------------------------------------------------------------------------------- Markdown
-def _cells(line: str) -> list[str]:
-    return [c.replace("**", "").strip() for c in line.strip().strip("|").split("|")]
-
-
-def section_lines(text: str, heading: str | None) -> list[tuple[int, str]]:
-    """(line number from 1, line) of ``text``, or of its section under the line ``heading`` (to the next
-    heading of the same or a higher level; lines in fenced code blocks are never headings).
-
-    Raises:
-        ValueError: no line is ``heading``.
-    """
-    lines = list(enumerate(text.splitlines(), 1))
-    if heading is None:
-        return lines
-    fenced, start, level = False, None, 0
-    for i, (_, line) in enumerate(lines):
-        if line.startswith("```"):
-            fenced = not fenced
-            continue
-        hashes = len(line) - len(line.lstrip("#"))
-        if fenced or not hashes or not line[hashes:].startswith(" "):
-            continue
-        if start is None and line.strip() == heading.strip():
-            start, level = i + 1, hashes
-        elif start is not None and hashes <= level:
-            return lines[start:i]
-    if start is None:
-        raise ValueError(f"no heading {heading!r}")
-    return lines[start:]
-
-
-def tables(lines: Sequence[tuple[int, str]]) -> list[Table]:
-    """The Markdown tables of numbered lines: (header line, header cells, [(line, cells)])."""
-    out: list[Table] = []
-    i = 0
-    while i + 1 < len(lines):
-        (n, line), (_, rule) = lines[i], lines[i + 1]
-        if line.startswith("|") and rule.startswith("|---"):
-            rows = []
-            j = i + 2
-            while j < len(lines) and lines[j][1].startswith("|"):
-                rows.append((lines[j][0], _cells(lines[j][1])))
-                j += 1
-            out.append((n, _cells(line), rows))
-            i = j
-        else:
-            i += 1
-    return out
-
-
 def _key_width(rows: Sequence[list[str]]) -> int:
     width = min((len(r) for r in rows), default=1)
     for n in range(1, width):
