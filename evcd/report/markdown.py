@@ -4,6 +4,7 @@ committed page read back (a section's tables, their cells)."""
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Sequence
 
 from evcd.report.seed_stats import SeedStat
@@ -58,6 +59,19 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list
     """A Markdown table: the first column left-aligned, the others right-aligned."""
     rule = "|---|" + "---:|" * (len(header) - 1)
     return ["| " + " | ".join(header) + " |", rule, *("| " + " | ".join(r) + " |" for r in rows)]
+
+
+def read_interval(cell: str) -> SeedStat:
+    """A table cell ``+2.7 [-6.0, +11.4]`` (bold, and a tail such as ``n=5``, allowed) read back as a
+    :class:`SeedStat` (mean, low, high; the seed count 0: a cell does not always say it).
+
+    Raises:
+        ValueError: the cell does not start with a mean and its interval.
+    """
+    m = re.match(r"([-+]?[\d.]+) \[([-+]?[\d.]+), ([-+]?[\d.]+)\]", cell.replace("**", "").strip())
+    if m is None:
+        raise ValueError(f"not a mean with its interval: {cell!r}")
+    return SeedStat(*map(float, m.groups()), 0)
 
 
 def _cells(line: str) -> list[str]:

@@ -13,7 +13,8 @@ and :data:`GENERATORS` maps the name to a function of the repository root that r
 Markdown from the data files committed beside the page (``docs/results.csv`` for the results table's
 headline and paired line, and the results page's tables of the README regime for the first command's
 line, :mod:`evcd.report.results_regions`; ``docs/fleet_table/fleet_results.csv`` for the fleet table's,
-:mod:`evcd.report.fleet_regions`). :func:`render_page` replaces
+:mod:`evcd.report.fleet_regions`; the perturbed page's goal table for the README's perturbed line,
+:mod:`evcd.report.perturbed_regions`). :func:`render_page` replaces
 every region of a page; :func:`differences` compares a page with its rendering line by line and,
 inside tables, cell by cell.
 """
@@ -24,7 +25,7 @@ import re
 from collections.abc import Callable
 from pathlib import Path
 
-from evcd.report import fleet_regions, results_regions
+from evcd.report import fleet_regions, perturbed_regions, results_regions
 
 BEGIN = re.compile(r"^<!-- generated: ([a-z0-9-]+) -->$")
 END = "<!-- end generated -->"
@@ -47,7 +48,8 @@ GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regi
                                                 "fleet-share-verdicts": fleet_regions.share_verdicts,
                                                 "fleet-room": fleet_regions.room,
                                                 "fleet-room-shares": fleet_regions.room_shares,
-                                                "fleet-room-worlds": fleet_regions.room_worlds}  # fmt: skip
+                                                "fleet-room-worlds": fleet_regions.room_worlds,
+                                                "perturbed-goal": perturbed_regions.goal}  # fmt: skip
 
 
 def regions(text: str) -> list[tuple[str, int, int]]:

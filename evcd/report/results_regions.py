@@ -13,11 +13,10 @@ Student-t interval across seeds) are those of the results page.
 from __future__ import annotations
 
 import csv
-import re
 from collections import defaultdict
 from pathlib import Path
 
-from evcd.report.markdown import interval, section_lines, signed_interval, tables, verdict
+from evcd.report.markdown import interval, read_interval, section_lines, signed_interval, tables, verdict
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
@@ -113,14 +112,6 @@ def paired(root: Path) -> str:
             f"{'; '.join(rule)}. The hindsight bound minus queue_aware, the room the rule leaves: {room}.")
 
 
-def _stat(cell: str) -> SeedStat:
-    """``+2.7 [-6.0, +11.4]`` as a :class:`SeedStat` (mean, low, high; the count is not in the cell)."""
-    m = re.fullmatch(r"([-+]?[\d.]+) \[([-+]?[\d.]+), ([-+]?[\d.]+)\]", cell.replace("**", "").strip())
-    if m is None:
-        raise ValueError(f"not a mean with its interval: {cell!r}")
-    return SeedStat(*map(float, m.groups()), 0)
-
-
 def regime(root: Path) -> str:
     """The README's line on the first command's regime, from the results page's section on it: Dueling
     DDQN, queue_aware and greedy over seeds, Dueling DDQN minus queue_aware paired, and where the other
@@ -136,7 +127,7 @@ def regime(root: Path) -> str:
     (_, header, rows), (_, pair_header, pair_rows) = found[:2]
     means = {cells[0]: cells[header.index("mean over seeds [95% t]")] for _, cells in rows}
     column = pair_header.index("- queue_aware: mean over seeds [95% t]")
-    against = {cells[0]: _stat(cells[column]) for _, cells in pair_rows}
+    against = {cells[0]: read_interval(cells[column]) for _, cells in pair_rows}
     seeds = sum(h.startswith("seed ") for h in header)
     own = against.pop("dueling_ddqn")
     said = {verdict(s) for s in against.values()}

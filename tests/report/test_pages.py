@@ -85,7 +85,8 @@ def _copy_root(tmp_path: Path) -> Path:
     for page in PAGES:
         shutil.copy(ROOT / page, root / page)
     shutil.copy(ROOT / "docs" / "results.csv", root / "docs" / "results.csv")
-    shutil.copy(ROOT / "docs" / "RESULTS.md", root / "docs" / "RESULTS.md")
+    for page in ("RESULTS.md", "PERTURBED.md"):
+        shutil.copy(ROOT / "docs" / page, root / "docs" / page)
     (root / "docs" / "fleet_table").mkdir()
     shutil.copy(ROOT / "docs" / "fleet_table" / "fleet_results.csv", root / "docs" / "fleet_table")
     for world in ("calm", "perturbed"):
@@ -283,3 +284,25 @@ def test_the_regime_line_reads_the_results_pages_tables_of_that_regime(tmp_path)
     (root / RESULTS).write_text(text.replace("### The README regime ", "### The first regime "))
     with pytest.raises(ValueError, match="no section '### The README regime'"):
         regime(root)
+
+
+def test_the_perturbed_line_reads_the_goal_table(tmp_path):
+    """The README's perturbed line from the perturbed page's goal table: the single target's plain
+    learner as the table says it; the fleet's learner seeing P, T, F moved below 0 on the page is named
+    as ahead of its rule; a page without the goal table is refused by name."""
+    from evcd.report.perturbed_regions import PAGE, goal
+
+    text = (ROOT / PAGE).read_text()
+    row = next(x for x in text.splitlines() if x.startswith("| single target | Dueling DDQN, plain |"))
+    cell = row.split(" | ")[3].split(" n=")[0]
+    root = _copy_root(tmp_path)
+    line = goal(root)
+    assert f"({cell} s); no learner beats every rule there" in line
+    fleet = next(x for x in text.splitlines() if x.startswith("| fleet | Dueling DDQN seeing"))
+    moved = fleet.replace(fleet.split(" | ")[3].removesuffix(" |"), "**-20.0 [-30.0, -10.0]** n=5, by seed")
+    (root / PAGE).write_text(text.replace(fleet, moved))
+    said = "ahead of its world's strongest rule: fleet: Dueling DDQN seeing `P`, `T`, `F` ahead of central"
+    assert said in goal(root)
+    (root / PAGE).write_text(text.replace("## The goal, in one table", "## The goal"))
+    with pytest.raises(ValueError, match="no heading '## The goal, in one table'"):
+        goal(root)
