@@ -29,6 +29,8 @@ from evcd.report.seed_stats import GapShare, SeedStat, gap_share, seed_interval
 from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
 
 CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
+#: The fleet table's job records (``scripts/reproduce.py fleet --records``): ``<sweep>/<job>/`` per job.
+RECORDS = Path("docs") / "fleet_table" / "runs" / "sweeps"
 #: The room's tables (``scripts/reproduce.py room``): the clairvoyant bound beside the rules, by world.
 ROOM = {world: Path("docs") / "fleet_room" / world / "fleet_results.csv" for world in ("calm", "perturbed")}
 #: The table's dispatchers, in the page's order.
@@ -48,6 +50,7 @@ class Job:
     eval_days: tuple[str, ...]
     stamp: JobStamp
     bound: float  # a fleet_bound job's proven bound (NaN for the others, and in tables without the column)
+    job_dir: str  # where the job ran (its record: RECORDS / <sweep> / <job>)
 
 
 def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, Job]]]:
@@ -59,7 +62,7 @@ def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, 
             out[float(r["guided_share"])][r["agent"]][int(r["seed"])] = Job(
                 int(r["guided"]), int(r["truncated"]), float(r["guided_travel"]), float(r["all_travel"]),
                 float(r["queue_wait"]), tuple(r["eval_days"].split()),
-                row_stamp(r), float(r.get("bound") or "nan"))  # fmt: skip
+                row_stamp(r), float(r.get("bound") or "nan"), r["job_dir"])  # fmt: skip
     return out
 
 
@@ -203,6 +206,54 @@ def share_verdicts(root: Path) -> str:
         parts.append(f"at {_share(share)}, {text}")
     return ("Each learner against the two rules that read the queues, per guided share (the verdict "
             "read from the paired interval): " + "; ".join(parts) + ".")
+
+
+def _days(root: Path, jobs: dict[int, Job]) -> dict[int, tuple[int, float]]:
+    """Day -> (guided EVs, their mean travel time) of a dispatcher's jobs, from their records'
+    ``fleet_episodes.csv`` (one fleet episode per day)."""
+    out = {}
+    for job in jobs.values():
+        record = Path(root) / RECORDS / Path(job.job_dir).parent.name / Path(job.job_dir).name
+        path = record / "fleet_episodes.csv"
+        if not path.is_file():
+            raise ValueError(f"no record of the job {job.job_dir} ({path}): the per-day reading needs the "
+                             "table's records (scripts/reproduce.py fleet --records docs/fleet_table/runs)")
+        with open(path, newline="") as f:
+            for e in csv.DictReader(f):
+                out[int(e["day"])] = (int(e["guided"]), float(e["guided_travel"]))
+    return out
+
+
+def _span(values: Iterable[float]) -> str:
+    """``291-616``: the range of values, rounded to the second."""
+    v = sorted(values)
+    return f"{v[0]:.0f}-{v[-1]:.0f}"
+
+
+def per_day(root: Path, days: int = 4, close: float = 10.0) -> str:
+    """The fleet page's reading per day at share 1 (every dispatcher plays one fleet episode a day): on
+    the ``days`` days where counting the centre's own EVs pays most (the largest ``queue_aware`` -
+    ``central`` gaps), each dispatcher's range of guided EVs' mean travel time; and on the days where the
+    two rules are within ``close`` seconds, how far the learners are from ``central``."""
+    jobs = read_jobs(root)[1.0]
+    agents = ("queue_aware", "central", *LEARNERS)
+    by = {a: _days(root, jobs[a]) for a in agents}
+    common = sorted(set.intersection(*(set(d) for d in by.values())))
+    gap = {d: by["queue_aware"][d][1] - by["central"][d][1] for d in common}
+    worst = sorted(common, key=lambda d: -gap[d])[:days]
+    guided = [by["central"][d][0] for d in worst]
+    ranges = ", ".join(f"{LEARNERS.get(a, a)} {_span(by[a][d][1] for d in worst)}" for a in agents)
+    level = [d for d in common if abs(gap[d]) <= close]
+    text = (f"- Per day at share 1 ({len(common)} days, one fleet episode each; the jobs' "
+            f"`fleet_episodes.csv`): on the {len(worst)} days where counting the centre's own EVs pays "
+            f"most (the largest queue_aware - central gaps: days {', '.join(map(str, worst))}, with "
+            f"{min(guided)}-{max(guided)} guided EVs), the guided EVs' mean travel time (s) ranges over "
+            f"{ranges}.")  # fmt: skip
+    if level:
+        off = max(abs(by[a][d][1] - by["central"][d][1]) for a in LEARNERS for d in level)
+        text += (f" On the {len(level)} days where the two rules are within {close:.0f} s of each other, "
+                 f"the learners are within {off:.0f} s of central.")  # fmt: skip
+    return text
 
 
 def _against_reservation(shares: dict[float, dict[str, dict[int, Job]]]) -> str:

@@ -5,6 +5,7 @@ are refused."""
 from __future__ import annotations
 
 import csv
+import json
 import shutil
 from pathlib import Path
 
@@ -306,3 +307,32 @@ def test_the_perturbed_line_reads_the_goal_table(tmp_path):
     (root / PAGE).write_text(text.replace("## The goal, in one table", "## The goal"))
     with pytest.raises(ValueError, match="no heading '## The goal, in one table'"):
         goal(root)
+
+
+def test_the_per_day_reading_reads_the_jobs_records(tmp_path):
+    """The fleet page's reading per day, from a csv of the recorded share-1 jobs of the fleet table and
+    their records: the day listed first is the one with the largest queue_aware - central gap, recomputed
+    by hand from the jobs' results.json; without the records it names the job and the command."""
+    from evcd.report.fleet_regions import CSV, RECORDS, per_day
+    from evcd.report.fleet_table import fleet_csv_text, fleet_job
+
+    jobs, travel = [], {}
+    for results in sorted((ROOT / RECORDS).glob("*/*/results.json")):
+        data = json.loads(results.read_text())
+        if data["config"]["fleet"]["guided_share"] == 1.0:
+            jobs.append(fleet_job(data, results.parent))
+            for e in data["episodes"]:
+                travel[data["agent"], e["day"]] = e["guided_travel"]
+    days = {d for a, d in travel if a == "central" and ("queue_aware", d) in travel}
+    assert len(days) >= 5, "the fleet table's records hold at least one seed at share 1"
+    first = max(days, key=lambda d: travel["queue_aware", d] - travel["central", d])
+    root = tmp_path / "repo"
+    (root / CSV).parent.mkdir(parents=True)
+    (root / CSV).write_text(fleet_csv_text(jobs))
+    (root / RECORDS).parent.mkdir(parents=True, exist_ok=True)
+    (root / RECORDS).symlink_to(ROOT / RECORDS)
+    line = per_day(root)
+    assert f"(the largest queue_aware - central gaps: days {first}, " in line
+    (root / RECORDS).unlink()
+    with pytest.raises(ValueError, match="needs the table's records"):
+        per_day(root)
