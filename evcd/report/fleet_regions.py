@@ -1,38 +1,33 @@
-"""The fleet's numbers on the documentation pages, rendered from ``docs/fleet_table/fleet_results.csv``
-and the room's tables (``docs/fleet_room/<world>/fleet_results.csv``).
+"""The fleet table's numbers on the documentation pages, rendered from
+``docs/fleet_table/fleet_results.csv`` (and, for the reading per day, the table's job records).
 
 Each function takes the repository root and returns a generated region's Markdown
-(:mod:`evcd.report.pages`): the README's headline and room line, the fleet page's tables at the highest
-competition and per guided share, its readings of where each learner stands against the rules (the
-verdicts read from the paired intervals), and its shares of the greedy -> bound gap. A csv holds one row
-per job; every dispatcher of a seed plays the same fleet episodes, so a difference paired by episode
-within a seed is the difference of the two jobs' means, and the paired rows here (the mean over seeds of
-those differences, with the 95% Student-t interval across seeds) are those of ``fleet_results.md``,
-which also counts the episodes each side won.
+(:mod:`evcd.report.pages`): the README's fleet headline, the fleet page's tables at the highest
+competition and per guided share, and its readings of where each learner stands against the rules (the
+verdicts read from the paired intervals). A csv holds one row per job; every dispatcher of a seed plays
+the same fleet episodes, so a difference paired by episode within a seed is the difference of the two
+jobs' means, and the paired rows here (the mean over seeds of those differences, with the 95% Student-t
+interval across seeds) are those of ``fleet_results.md``, which also counts the episodes each side won.
+The room the best rule leaves (the clairvoyant bound's tables): :mod:`evcd.report.room_regions`.
 """
 
 from __future__ import annotations
 
 import csv
-import math
 from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from evcd.report.markdown import interval, markdown_table, signed, verdict
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.markdown import signed_interval as _signed
-from evcd.report.seed_stats import GapShare, SeedStat, gap_share, seed_interval
+from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
 
 CSV = Path("docs") / "fleet_table" / "fleet_results.csv"
 #: The fleet table's job records (``scripts/reproduce.py fleet --records``): ``<sweep>/<job>/`` per job.
 RECORDS = Path("docs") / "fleet_table" / "runs" / "sweeps"
-#: The room's tables (``scripts/reproduce.py room``): the clairvoyant bound beside the rules, by world.
-ROOM = {world: Path("docs") / "fleet_room" / world / "fleet_results.csv" for world in ("calm", "perturbed")}
 #: The table's dispatchers, in the page's order.
 DISPATCHERS = ("greedy", "queue_aware", "reservation", "central", "dqn", "dueling_ddqn")
 LEARNERS = {"dqn": "DQN", "dueling_ddqn": "Dueling DDQN"}
@@ -72,8 +67,8 @@ def paired(jobs: dict[str, dict[int, Job]], a: str, b: str) -> SeedStat:
     return seed_interval(jobs[a][s].guided_travel - jobs[b][s].guided_travel for s in seeds)
 
 
-def _mean(jobs: dict[int, Job], field: str) -> float:
-    """The mean over seeds of a job field."""
+def seed_mean(jobs: dict[int, Job], field: str) -> float:
+    """The mean over seeds of a job field (``guided_travel``, ``queue_wait``, ...)."""
     return seed_interval(getattr(j, field) for j in jobs.values()).mean
 
 
@@ -87,7 +82,8 @@ def _made(shares: Iterable[dict[str, dict[int, Job]]]) -> str:
     return stamp_sentence([j.stamp for jobs in shares for by_seed in jobs.values() for j in by_seed.values()])
 
 
-def _share(share: float) -> str:
+def share_label(share: float) -> str:
+    """A guided share as the pages write it: ``1``, ``0.5``, ``0.25``."""
     return f"{share:g}"
 
 
@@ -130,9 +126,9 @@ def share_one(root: Path) -> str:
             "mean over seeds [95 % t interval]",
             *map(interval, travel.values()),
         ],
-        ["all EVs charging in the window", *(f"{_mean(jobs[a], 'all_travel'):.1f}" for a in DISPATCHERS)],
+        ["all EVs charging in the window", *(f"{seed_mean(jobs[a], 'all_travel'):.1f}" for a in DISPATCHERS)],
         [f"guided EVs truncated (of {guided:,})", *(f"{_total(jobs[a], 'truncated')}" for a in DISPATCHERS)],
-        ["mean queue wait (s)", *(f"{_mean(jobs[a], 'queue_wait'):.1f}" for a in DISPATCHERS)],
+        ["mean queue wait (s)", *(f"{seed_mean(jobs[a], 'queue_wait'):.1f}" for a in DISPATCHERS)],
     ]
     pairs = [[a, *(_marked(paired(jobs, a, rule)) for rule in ("queue_aware", "reservation", "central"))]
              for a in LEARNERS]  # fmt: skip
@@ -151,7 +147,7 @@ def _standing(jobs: dict[str, dict[int, Job]], a: str, rule: str) -> str:
     stat = paired(jobs, a, rule)
     seeds = sorted(set(jobs[a]) & set(jobs[rule]))
     faster = sum(jobs[a][s].guided_travel < jobs[rule][s].guided_travel for s in seeds)
-    part = abs(stat.mean) / _mean(jobs[rule], "guided_travel")
+    part = abs(stat.mean) / seed_mean(jobs[rule], "guided_travel")
     return (f"{verdict(stat)} it: {_signed(stat)} s, {part:.0%} of its time, faster on {faster} of "
             f"{len(seeds)} seeds")
 
@@ -203,7 +199,7 @@ def share_verdicts(root: Path) -> str:
         if all(s.low > 0 for s in stats):
             means = sorted(s.mean for s in stats)
             text += f" (by {means[0]:.1f} to {means[-1]:.1f} s)"
-        parts.append(f"at {_share(share)}, {text}")
+        parts.append(f"at {share_label(share)}, {text}")
     return ("Each learner against the two rules that read the queues, per guided share (the verdict "
             "read from the paired interval): " + "; ".join(parts) + ".")
 
@@ -258,8 +254,10 @@ def per_day(root: Path, days: int = 4, close: float = 10.0) -> str:
 
 def _against_reservation(shares: dict[float, dict[str, dict[int, Job]]]) -> str:
     """Each learner minus ``reservation`` per guided share."""
-    cells = [f"{' / '.join(_marked(paired(shares[s], a, 'reservation')) for a in LEARNERS)} at {_share(s)}"
-             for s in sorted(shares, reverse=True)]  # fmt: skip
+    cells = []
+    for s in sorted(shares, reverse=True):
+        both = " / ".join(_marked(paired(shares[s], a, "reservation")) for a in LEARNERS)
+        cells.append(f"{both} at {share_label(s)}")
     names = " / ".join(LEARNERS.values())
     return f"{names} minus reservation (s, mean over seeds [95% t]; bold as above): {'; '.join(cells)}."
 
@@ -274,10 +272,10 @@ def per_share(root: Path) -> str:
         cells = []
         for a in DISPATCHERS:
             cut = _total(jobs[a], "truncated")
-            cells.append(f"{_mean(jobs[a], 'guided_travel'):.1f}" + (f" ({cut} trunc.)" if cut else ""))
-        rows.append([_share(share), f"{_total(jobs['central'], 'guided'):,}", *cells])
+            cells.append(f"{seed_mean(jobs[a], 'guided_travel'):.1f}" + (f" ({cut} trunc.)" if cut else ""))
+        rows.append([share_label(share), f"{_total(jobs['central'], 'guided'):,}", *cells])
         learners = [paired(jobs, a, rule) for rule in ("queue_aware", "central") for a in LEARNERS]
-        pairs.append([_share(share), *map(_marked, [*learners, paired(jobs, "central", "queue_aware")])])
+        pairs.append([share_label(share), *map(_marked, [*learners, paired(jobs, "central", "queue_aware")])])
     header = ["share", "guided EVs", *DISPATCHERS]
     pair_header = ["share", "dqn - queue_aware", "dueling_ddqn - queue_aware", "dqn - central",
                    "dueling_ddqn - central", "central - queue_aware"]  # fmt: skip
@@ -287,72 +285,3 @@ def per_share(root: Path) -> str:
                       "seeds; bold: the interval leaves out 0; the episodes each side won: "
                       "`fleet_results.md`):", "", *markdown_table(pair_header, pairs), "",
                       _against_reservation(shares), "", _made(shares.values())])  # fmt: skip
-
-
-def room(root: Path) -> str:
-    """The README's line on the room ``central`` leaves: ``central`` minus the played plan (the
-    clairvoyant dispatcher, :mod:`evcd.loops.fleet_bound`) per guided EV, calm and perturbed, at the
-    highest and the lowest guided share."""
-    worlds = {world: read_jobs(root, table) for world, table in ROOM.items()}
-    top, low = max(worlds["calm"]), min(worlds["calm"])
-    at_top = []
-    for world, shares in worlds.items():
-        room_ = paired(shares[top], "central", "fleet_bound")
-        part = room_.mean / _mean(shares[top]["central"], "guided_travel")
-        at_top.append(f"{_signed(room_)} {world} ({part:.0%} of central's time)")
-    lows = [f"{signed(paired(worlds[w][low], 'central', 'fleet_bound').mean)} {w}" for w in worlds]
-    seeds = len(worlds["calm"][top]["central"])
-    return (f"- How much room central leaves on the fleet, per guided EV: central minus a dispatcher that "
-            f"knows the future, played in SUMO on the same episodes (600 EVs, guided share {_share(top)}, "
-            f"{seeds} seeds; s, mean over seeds [95% t]): {' and '.join(at_top)}; at guided share "
-            f"{_share(low)}, {' and '.join(lows)} ([`docs/FLEET.md`](docs/FLEET.md)).")  # fmt: skip
-
-
-def room_worlds(root: Path) -> str:
-    """The fleet page's line per world: ``central`` minus the played plan and minus the proven bound,
-    per guided EV, at each guided share (the mean over seeds of the seeds' differences)."""
-    lines = []
-    for world, table in ROOM.items():
-        shares = read_jobs(root, table)
-        order = sorted(shares, reverse=True)
-        plan = " / ".join(signed(paired(shares[s], "central", "fleet_bound").mean) for s in order)
-        bound = []
-        for s in order:
-            central, bounds = shares[s]["central"], shares[s]["fleet_bound"]
-            seeds = sorted(set(central) & set(bounds))
-            bound.append(signed(float(np.mean([central[k].guided_travel - bounds[k].bound for k in seeds]))))
-        lines.append(f"- {world}: {plan} to the played plan; {' / '.join(bound)} to the bound (guided shares "
-                     f"{' / '.join(map(_share, order))}).")  # fmt: skip
-    return "\n".join(lines)
-
-
-def _gap_text(gap: GapShare) -> str:
-    """A share of the gap with its interval (none for one seed), or ``no room``."""
-    if not gap.room:
-        return "no room"
-    return f"{gap.share:.2f}" + (f" [{gap.low:.2f}, {gap.high:.2f}]" if math.isfinite(gap.low) else "")
-
-
-def room_shares(root: Path) -> str:
-    """The fleet page's table of the share of the greedy -> proven bound gap each dispatcher closes, per
-    guided share, calm: ``central`` and the played plan from the room's table, the fleet table's
-    learners and ``queue_aware`` on the same episodes (the seed means; a paired bootstrap over seeds
-    drawn from one generator of seed 0, in the table's order)."""
-    room, table = read_jobs(root, ROOM["calm"]), read_jobs(root)
-    shares = sorted(room, reverse=True)
-    rows = {"central": (room, "central"), "played plan": (room, "fleet_bound"),
-            **{a: (table, a) for a in ("dqn", "dueling_ddqn", "queue_aware")}}  # fmt: skip
-    rng = np.random.default_rng(0)
-    cells: dict[str, list[str]] = {name: [] for name in rows}
-    for share in shares:
-        greedy = {s: j.guided_travel for s, j in room[share]["greedy"].items()}
-        bound = {s: j.bound for s, j in room[share]["fleet_bound"].items()}
-        for name, (jobs, agent) in rows.items():
-            mine = {s: j.guided_travel for s, j in jobs[share][agent].items()}
-            cells[name].append(_gap_text(gap_share(greedy, mine, bound, rng)))
-    header = ["share of the gap closed", *(f"guided share {_share(s)}" for s in shares)]
-    return "\n".join([*markdown_table(header, [[n, *c] for n, c in cells.items()]), "",
-                      "(G - A) / (G - B) of the seed means, G greedy, B the proven bound, A the dispatcher "
-                      "[95% paired bootstrap interval over seeds]; `central` and the played plan from the "
-                      "room's table, the learners and `queue_aware` from the fleet table, on the same "
-                      "episodes."])  # fmt: skip

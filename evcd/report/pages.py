@@ -25,7 +25,7 @@ import re
 from collections.abc import Callable
 from pathlib import Path
 
-from evcd.report import fleet_regions, perturbed_regions, results_regions
+from evcd.report import fleet_regions, perturbed_regions, results_regions, room_regions
 
 BEGIN = re.compile(r"^<!-- generated: ([a-z0-9-]+) -->$")
 END = "<!-- end generated -->"
@@ -46,9 +46,9 @@ GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regi
                                                 "fleet-per-share": fleet_regions.per_share,
                                                 "fleet-against-rules": fleet_regions.against_rules,
                                                 "fleet-share-verdicts": fleet_regions.share_verdicts,
-                                                "fleet-room": fleet_regions.room,
-                                                "fleet-room-shares": fleet_regions.room_shares,
-                                                "fleet-room-worlds": fleet_regions.room_worlds,
+                                                "fleet-room": room_regions.room,
+                                                "fleet-room-shares": room_regions.room_shares,
+                                                "fleet-room-worlds": room_regions.room_worlds,
                                                 "perturbed-goal": perturbed_regions.goal}  # fmt: skip
 
 
