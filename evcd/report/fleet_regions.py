@@ -142,14 +142,14 @@ def share_one(root: Path) -> str:
 
 
 def _standing(jobs: dict[str, dict[int, Job]], a: str, rule: str) -> str:
-    """``ahead of it: -45.2 [-78.6, -11.8] s, 13% of its time, faster on 5 of 5 seeds``: where learner
+    """``ahead of it, -45.2 [-78.6, -11.8] (13% of its time; faster on 5 of 5 seeds)``: where learner
     ``a`` stands against ``rule`` (read from the paired interval) and by how much."""
     stat = paired(jobs, a, rule)
     seeds = sorted(set(jobs[a]) & set(jobs[rule]))
     faster = sum(jobs[a][s].guided_travel < jobs[rule][s].guided_travel for s in seeds)
     part = abs(stat.mean) / seed_mean(jobs[rule], "guided_travel")
-    return (f"{verdict(stat)} it: {_signed(stat)} s, {part:.0%} of its time, faster on {faster} of "
-            f"{len(seeds)} seeds")
+    return (f"{verdict(stat)} it, {_signed(stat)} ({part:.0%} of its time; faster on {faster} of "
+            f"{len(seeds)} seeds)")
 
 
 def against_rules(root: Path) -> str:
@@ -160,21 +160,21 @@ def against_rules(root: Path) -> str:
     jobs = read_jobs(root)[1.0]
     named = {"queue_aware": "queue_aware", "reservation": "reservation",
              "central": "central, the rule that assigns the EVs of a tick jointly"}  # fmt: skip
-    parts = [f"Against {named[rule]}: " + "; ".join(f"{name} {_standing(jobs, a, rule)}"
-                                                     for a, name in LEARNERS.items()) + "."
-             for rule in named]  # fmt: skip
-    text = ("**Against the rules** (guided share 1; each learner minus the rule on the same episodes, "
-            "mean over seeds [95% t]). " + " ".join(parts))  # fmt: skip
+    lines = ["**Against the rules** (guided share 1; each learner minus the rule on the same episodes, s, "
+             "mean over seeds [95% t]):", ""]  # fmt: skip
+    for rule, name in named.items():
+        lines.append(f"- {name}: " + "; ".join(f"{learner} {_standing(jobs, a, rule)}"
+                                             for a, learner in LEARNERS.items()) + ".")  # fmt: skip
     ahead = [a for a in LEARNERS if paired(jobs, a, "queue_aware").high < 0]
     if ahead:
         own = {a: seed_interval(j.guided_travel for j in jobs[a].values()) for a in (*ahead, "queue_aware")}
         apart = all(own[a].high < own["queue_aware"].low for a in ahead)
         cells = ", ".join(f"{LEARNERS.get(a, a)} {interval(own[a])}" for a in own)
-        text += (f" Read as the dispatchers' own intervals not overlapping, the lead on queue_aware is "
-                 f"{'shown too' if apart else 'not shown'} ({cells}): those intervals hold the spread of "
-                 "the days between seeds (one seed's days are heavier than another's), which the pairing "
-                 "removes; the paired interval is the test of the question asked.")  # fmt: skip
-    return text
+        lines += ["", f"Read as the dispatchers' own intervals not overlapping, the lead on queue_aware is "
+                      f"{'shown too' if apart else 'not shown'} ({cells}): those intervals hold the spread "
+                      "of the days between seeds (one seed's days are heavier than another's), which the "
+                      "pairing removes; the paired interval is the test of the question asked."]  # fmt: skip
+    return "\n".join(lines)
 
 
 def _verdicts(jobs: dict[str, dict[int, Job]]) -> dict[str, str]:

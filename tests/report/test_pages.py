@@ -249,15 +249,15 @@ def test_the_fleet_readings_follow_the_paired_intervals(tmp_path):
     diff = sum(by_agent["dqn"][s] - rule[s] for s in rule) / len(rule)
     root = _copy_root(tmp_path)
     text = against_rules(root)
-    assert f"Against queue_aware: DQN ahead of it: {diff:+.1f} [" in text
+    assert f"- queue_aware: DQN ahead of it, {diff:+.1f} [" in text
     part = abs(diff) / (sum(rule.values()) / len(rule))
-    assert f"s, {part:.0%} of its time, faster on 5 of 5 seeds; Dueling DDQN ahead of it" in text
+    assert f"] ({part:.0%} of its time; faster on 5 of 5 seeds); Dueling DDQN ahead of it" in text
     assert "the lead on queue_aware is not shown (DQN " in text
     line = share_verdicts(root)
     assert "at 0.5, both learners level with queue_aware and level with central;" in line
     _shift_fleet(root, "dqn", 1.0, 100.0)
     text = against_rules(root)
-    assert "Against queue_aware: DQN behind it: +54.8 [" in text
+    assert "- queue_aware: DQN behind it, +54.8 [" in text
     assert "the lead on queue_aware is not shown (Dueling DDQN " in text
     line = share_verdicts(root)
     assert "at 1, DQN behind queue_aware and behind central, Dueling DDQN ahead of queue_aware" in line
