@@ -14,6 +14,9 @@ The room the best rule leaves (the clairvoyant bound's tables): :mod:`evcd.repor
 from __future__ import annotations
 
 import csv
+import json
+import math
+import re
 from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -22,6 +25,8 @@ from pathlib import Path
 from evcd.report.markdown import interval, markdown_table, signed, verdict
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.markdown import signed_interval as _signed
+from evcd.report.reproduce.launch import MANIFEST, launches_span
+from evcd.report.reproduce.render import log_wall
 from evcd.report.seed_stats import SeedStat, seed_interval
 from evcd.report.stamp import JobStamp, row_stamp, stamp_sentence
 
@@ -45,6 +50,8 @@ class Job:
     eval_days: tuple[str, ...]
     stamp: JobStamp
     bound: float  # a fleet_bound job's proven bound (NaN for the others, and in tables without the column)
+    train_wall_s: float  # the learner's training time (0 for a rule)
+    train_transitions: int  # the learner's agent steps in training (0 for a rule)
     job_dir: str  # where the job ran (its record: RECORDS / <sweep> / <job>)
 
 
@@ -57,7 +64,8 @@ def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, 
             out[float(r["guided_share"])][r["agent"]][int(r["seed"])] = Job(
                 int(r["guided"]), int(r["truncated"]), float(r["guided_travel"]), float(r["all_travel"]),
                 float(r["queue_wait"]), tuple(r["eval_days"].split()),
-                row_stamp(r), float(r.get("bound") or "nan"), r["job_dir"])  # fmt: skip
+                row_stamp(r), float(r.get("bound") or "nan"), float(r["train_wall_s"]),
+                int(r["train_transitions"]), r["job_dir"])  # fmt: skip
     return out
 
 
@@ -204,20 +212,54 @@ def share_verdicts(root: Path) -> str:
             "read from the paired interval): " + "; ".join(parts) + ".")
 
 
+def _record(root: Path, job: Job) -> Path:
+    """A job's record (``RECORDS/<sweep>/<job>``, kept by ``scripts/reproduce.py fleet --records``).
+
+    Raises:
+        ValueError: the table's records do not hold it.
+    """
+    record = Path(root) / RECORDS / Path(job.job_dir).parent.name / Path(job.job_dir).name
+    if not (record / "results.json").is_file():
+        raise ValueError(f"no record of the job {job.job_dir} ({record}): this needs the table's records "
+                         "(scripts/reproduce.py fleet --records docs/fleet_table/runs)")  # fmt: skip
+    return record
+
+
 def _days(root: Path, jobs: dict[int, Job]) -> dict[int, tuple[int, float]]:
     """Day -> (guided EVs, their mean travel time) of a dispatcher's jobs, from their records'
     ``fleet_episodes.csv`` (one fleet episode per day)."""
     out = {}
     for job in jobs.values():
-        record = Path(root) / RECORDS / Path(job.job_dir).parent.name / Path(job.job_dir).name
-        path = record / "fleet_episodes.csv"
-        if not path.is_file():
-            raise ValueError(f"no record of the job {job.job_dir} ({path}): the per-day reading needs the "
-                             "table's records (scripts/reproduce.py fleet --records docs/fleet_table/runs)")
-        with open(path, newline="") as f:
+        with open(_record(root, job) / "fleet_episodes.csv", newline="") as f:
             for e in csv.DictReader(f):
                 out[int(e["day"])] = (int(e["guided"]), float(e["guided_travel"]))
     return out
+
+
+def cost(root: Path) -> str:
+    """The fleet page's line on what the table cost on the machine that made it: per guided share, a
+    learner job's wall time (its log, sessions summed), the learners' training time and agent steps on
+    average, a rule job's wall time; and the page's launches together (the records' manifest)."""
+    shares = read_jobs(root)
+    parts = []
+    for share in sorted(shares, reverse=True):
+        jobs = shares[share]
+        walls = {a: [log_wall(_record(root, j)) or math.nan for j in jobs[a].values()] for a in jobs}
+        learners = [w / 60 for a in LEARNERS for w in walls[a]]
+        rules = [w / 60 for a in walls if a not in LEARNERS for w in walls[a]]
+        training = " / ".join(f"{seed_mean(jobs[a], 'train_wall_s') / 60:.1f}" for a in LEARNERS)
+        steps = " / ".join(f"{seed_mean(jobs[a], 'train_transitions'):,.0f}" for a in LEARNERS)
+        parts.append(f"at share {share_label(share)}, a learner job {_span(learners)} minutes "
+                     f"({' / '.join(LEARNERS.values())}: {training} minutes of training on average, {steps} "
+                     f"agent steps), a rule job {_span(rules)} minutes")  # fmt: skip
+    manifest = json.loads((Path(root) / RECORDS.parent / MANIFEST).read_text())
+    launches = manifest["launches"]
+    at_once = re.search(r"hydra\.launcher\.n_jobs=(\d+)", launches[0]["command"])
+    together = f"{at_once.group(1)} jobs at once" if at_once else "one job at a time"
+    return (f"What it cost on the machine that made it ({together}; the jobs' logs and `results.json`): "
+            f"{'; '.join(parts)}. The page's {len(launches)} launches: "
+            f"{launches_span(launches) / 3600:.1f} h in all (`reproduce.json`; pauses for other work on the "
+            "machine included).")  # fmt: skip
 
 
 def _span(values: Iterable[float]) -> str:

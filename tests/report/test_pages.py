@@ -309,30 +309,52 @@ def test_the_perturbed_line_reads_the_goal_table(tmp_path):
         goal(root)
 
 
-def test_the_per_day_reading_reads_the_jobs_records(tmp_path):
-    """The fleet page's reading per day, from a csv of the recorded share-1 jobs of the fleet table and
-    their records: the day listed first is the one with the largest queue_aware - central gap, recomputed
-    by hand from the jobs' results.json; without the records it names the job and the command."""
-    from evcd.report.fleet_regions import CSV, RECORDS, per_day
+def _recorded_root(tmp_path: Path) -> tuple[Path, list[dict]]:
+    """A root whose fleet csv holds the fleet table's recorded jobs (made from their records' results.json)
+    beside a link to the records; and those jobs' results."""
+    from evcd.report.fleet_regions import CSV, RECORDS
     from evcd.report.fleet_table import fleet_csv_text, fleet_job
 
-    jobs, travel = [], {}
-    for results in sorted((ROOT / RECORDS).glob("*/*/results.json")):
-        data = json.loads(results.read_text())
-        if data["config"]["fleet"]["guided_share"] == 1.0:
-            jobs.append(fleet_job(data, results.parent))
-            for e in data["episodes"]:
-                travel[data["agent"], e["day"]] = e["guided_travel"]
-    days = {d for a, d in travel if a == "central" and ("queue_aware", d) in travel}
-    assert len(days) >= 5, "the fleet table's records hold at least one seed at share 1"
-    first = max(days, key=lambda d: travel["queue_aware", d] - travel["central", d])
+    jobs, results = [], []
+    for path in sorted((ROOT / RECORDS).glob("*/*/results.json")):
+        results.append(json.loads(path.read_text()))
+        jobs.append(fleet_job(results[-1], path.parent))
     root = tmp_path / "repo"
     (root / CSV).parent.mkdir(parents=True)
     (root / CSV).write_text(fleet_csv_text(jobs))
-    (root / RECORDS).parent.mkdir(parents=True, exist_ok=True)
-    (root / RECORDS).symlink_to(ROOT / RECORDS)
-    line = per_day(root)
-    assert f"(the largest queue_aware - central gaps: days {first}, " in line
-    (root / RECORDS).unlink()
+    (root / RECORDS.parent).symlink_to(ROOT / RECORDS.parent)
+    return root, results
+
+
+def test_the_per_day_reading_reads_the_jobs_records(tmp_path):
+    """The fleet page's reading per day, from a csv of the recorded jobs of the fleet table and their
+    records: the day listed first is the one with the largest queue_aware - central gap at share 1,
+    recomputed by hand from the jobs' results.json; without the records it names the job and the
+    command."""
+    from evcd.report.fleet_regions import RECORDS, per_day
+
+    root, results = _recorded_root(tmp_path)
+    travel = {(r["agent"], e["day"]): e["guided_travel"] for r in results
+              if r["config"]["fleet"]["guided_share"] == 1.0 for e in r["episodes"]}  # fmt: skip
+    days = {d for a, d in travel if a == "central" and ("queue_aware", d) in travel}
+    assert len(days) >= 5, "the fleet table's records hold at least one seed at share 1"
+    first = max(days, key=lambda d: travel["queue_aware", d] - travel["central", d])
+    assert f"(the largest queue_aware - central gaps: days {first}, " in per_day(root)
+    (root / RECORDS.parent).unlink()
     with pytest.raises(ValueError, match="needs the table's records"):
         per_day(root)
+
+
+def test_the_cost_line_reads_the_jobs_and_the_manifest(tmp_path):
+    """The fleet page's cost line from the recorded jobs: DQN's mean training minutes at share 1
+    recomputed by hand from results.json, and the launches counted from the records' manifest."""
+    from evcd.report.fleet_regions import RECORDS, cost
+
+    root, results = _recorded_root(tmp_path)
+    minutes = [r["training"]["wall_s"] / 60 for r in results
+               if r["agent"] == "dqn" and r["config"]["fleet"]["guided_share"] == 1.0]  # fmt: skip
+    launches = json.loads((ROOT / RECORDS.parent / "reproduce.json").read_text())["launches"]
+    line = cost(root)
+    assert line.startswith("What it cost on the machine that made it (2 jobs at once;")
+    assert f"(DQN / Dueling DDQN: {sum(minutes) / len(minutes):.1f} / " in line.split("at share 0.5")[0]
+    assert f"The page's {len(launches)} launches: " in line
