@@ -69,10 +69,14 @@ def read_jobs(root: Path, table: Path = CSV) -> dict[float, dict[str, dict[int, 
     return out
 
 
+def seed_differences(jobs: dict[str, dict[int, Job]], a: str, b: str) -> list[float]:
+    """``a`` minus ``b`` on the guided EVs, seed by seed (in seed order), over the seeds both have."""
+    return [jobs[a][s].guided_travel - jobs[b][s].guided_travel for s in sorted(set(jobs[a]) & set(jobs[b]))]
+
+
 def paired(jobs: dict[str, dict[int, Job]], a: str, b: str) -> SeedStat:
     """``a`` minus ``b`` on the guided EVs, paired by seed, over the seeds both have."""
-    seeds = sorted(set(jobs[a]) & set(jobs[b]))
-    return seed_interval(jobs[a][s].guided_travel - jobs[b][s].guided_travel for s in seeds)
+    return seed_interval(seed_differences(jobs, a, b))
 
 
 def seed_mean(jobs: dict[int, Job], field: str) -> float:
@@ -113,9 +117,9 @@ def _per_seed(jobs: dict[str, dict[int, Job]]) -> str:
     """Dueling DDQN minus DQN, and each learner minus ``queue_aware`` seed by seed with the seeds it is
     faster on."""
     seeds = sorted(set(jobs["queue_aware"]))
-    parts, rule = [], jobs["queue_aware"]
+    parts = []
     for a, name in LEARNERS.items():
-        diffs = [jobs[a][s].guided_travel - rule[s].guided_travel for s in seeds if s in jobs[a]]
+        diffs = seed_differences(jobs, a, "queue_aware")
         faster = sum(d < 0 for d in diffs)
         parts.append(f"{name} {' / '.join(signed(d) for d in diffs)} (faster on {faster} of {len(diffs)})")
     return (f"Dueling DDQN - DQN: {_signed(paired(jobs, 'dueling_ddqn', 'dqn'))}. Per seed "
@@ -152,12 +156,11 @@ def share_one(root: Path) -> str:
 def _standing(jobs: dict[str, dict[int, Job]], a: str, rule: str) -> str:
     """``ahead of it, -45.2 [-78.6, -11.8] (13% of its time; faster on 5 of 5 seeds)``: where learner
     ``a`` stands against ``rule`` (read from the paired interval) and by how much."""
-    stat = paired(jobs, a, rule)
-    seeds = sorted(set(jobs[a]) & set(jobs[rule]))
-    faster = sum(jobs[a][s].guided_travel < jobs[rule][s].guided_travel for s in seeds)
+    diffs = seed_differences(jobs, a, rule)
+    stat = seed_interval(diffs)
     part = abs(stat.mean) / seed_mean(jobs[rule], "guided_travel")
-    return (f"{verdict(stat)} it, {_signed(stat)} ({part:.0%} of its time; faster on {faster} of "
-            f"{len(seeds)} seeds)")
+    return (f"{verdict(stat)} it, {_signed(stat)} ({part:.0%} of its time; faster on "
+            f"{sum(d < 0 for d in diffs)} of {len(diffs)} seeds)")
 
 
 def against_rules(root: Path) -> str:
@@ -263,7 +266,7 @@ def cost(root: Path) -> str:
 
 
 def _span(values: Iterable[float]) -> str:
-    """``291-616``: the range of values, rounded to the second."""
+    """``291-616``: the range of values, each rounded to a whole unit."""
     v = sorted(values)
     return f"{v[0]:.0f}-{v[-1]:.0f}"
 
