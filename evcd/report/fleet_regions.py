@@ -216,12 +216,16 @@ def share_verdicts(root: Path) -> str:
 
 
 def _record(root: Path, job: Job) -> Path:
-    """A job's record (``RECORDS/<sweep>/<job>``, kept by ``scripts/reproduce.py fleet --records``).
+    """A job's run directory where it still is (its ``job_dir``, relative to ``root`` if relative), else
+    its record (``RECORDS/<sweep>/<job>``, kept by ``scripts/reproduce.py fleet --records``).
 
     Raises:
-        ValueError: the table's records do not hold it.
+        ValueError: neither holds it.
     """
-    record = Path(root) / RECORDS / Path(job.job_dir).parent.name / Path(job.job_dir).name
+    own = Path(root) / job.job_dir
+    if (own / "results.json").is_file():
+        return own
+    record = Path(root) / RECORDS / own.parent.name / own.name
     if not (record / "results.json").is_file():
         raise ValueError(f"no record of the job {job.job_dir} ({record}): this needs the table's records "
                          "(scripts/reproduce.py fleet --records docs/fleet_table/runs)")  # fmt: skip

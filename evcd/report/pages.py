@@ -22,7 +22,7 @@ inside tables, cell by cell.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 
 from evcd.report import fleet_regions, perturbed_regions, results_regions, room_regions
@@ -80,11 +80,13 @@ def regions(text: str) -> list[tuple[str, int, int]]:
     return out
 
 
-def render_page(text: str, root: Path) -> str:
-    """``text`` with every generated region's content rendered from the data under ``root``."""
+def render_page(text: str, root: Path, keep: Collection[str] = ()) -> str:
+    """``text`` with every generated region's content rendered from the data under ``root``, but the
+    regions named in ``keep``, left as they are."""
     lines = text.splitlines()
     for name, first, end in reversed(regions(text)):
-        lines[first:end] = GENERATORS[name](root).splitlines()
+        if name not in keep:
+            lines[first:end] = GENERATORS[name](root).splitlines()
     return "\n".join(lines) + ("\n" if text.endswith("\n") else "")
 
 

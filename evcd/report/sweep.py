@@ -200,9 +200,14 @@ def _load_yaml(path: Path) -> Any:
         raise ResultsError(f"{path}: unreadable ({exc})") from exc
 
 
+# Overrides that never change a job's results: a run continued from its checkpoint is the job it
+# continues, and where the days are cached is where, not what (the cache is safe to delete).
+NOT_DEFINING = frozenset({"resume", "env.cache_dir"})
+
+
 def _job_defining(overrides: Any) -> list[str]:
-    """Recorded overrides but ``resume``: a run continued from its checkpoint is the job it continues."""
-    return [str(o) for o in overrides or () if str(o).partition("=")[0].lstrip("+~") != "resume"]
+    """Recorded overrides but those of :data:`NOT_DEFINING`."""
+    return [str(o) for o in overrides or () if str(o).partition("=")[0].lstrip("+~") not in NOT_DEFINING]
 
 
 def _task_overrides(sweep_dir: Path) -> list[str]:
@@ -216,7 +221,7 @@ def _task_overrides(sweep_dir: Path) -> list[str]:
 
 def job_overrides(job_dir: Path) -> tuple[str, ...]:
     """The overrides a run directory records (``.hydra/overrides.yaml``; none if it has no record), but
-    ``resume``: a run continued from its checkpoint is the job it continues."""
+    those that never change its results (:data:`NOT_DEFINING`: ``resume``, ``env.cache_dir``)."""
     path = job_dir / OVERRIDES_YAML
     return tuple(_job_defining(_load_yaml(path))) if path.is_file() else ()
 

@@ -26,7 +26,7 @@ import yaml
 
 from evcd.env.runners import EpisodeRow
 from evcd.loops.run_files import episodes_csv_text
-from evcd.report.sweep import IncompleteSweepError, ResultsError, collect, expand_sweep
+from evcd.report.sweep import IncompleteSweepError, ResultsError, collect, expand_sweep, job_overrides
 from evcd.report.table import (
     BARS_PNG,
     CSV_COLUMNS,
@@ -550,3 +550,10 @@ def test_validation_curves_average_the_seeds_and_stay_out_of_the_csv(tmp_path):
     assert "| EVs | agent | after 100 | after 200 |" in out.markdown
     assert "| 200 | dqn | +133.5 [+89.0, +178.0] n=2 | +83.5 [+39.0, +128.0] n=2 |" in out.markdown
     assert "| 200 | greedy |" not in out.markdown.split("### Validation by training length")[1]
+
+
+def test_a_jobs_identity_leaves_out_where_its_days_were_cached_and_whether_it_resumed(tmp_path):
+    (tmp_path / ".hydra").mkdir()
+    recorded = ["experiment=fleet", "seed=3", "env.cache_dir=/scratch/days", "resume=true", "agent=dqn"]
+    (tmp_path / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump(recorded))
+    assert job_overrides(tmp_path) == ("experiment=fleet", "seed=3", "agent=dqn")

@@ -309,20 +309,23 @@ def test_the_perturbed_line_reads_the_goal_table(tmp_path):
         goal(root)
 
 
-def _recorded_root(tmp_path: Path) -> tuple[Path, list[dict]]:
+def _recorded_root(tmp_path: Path, ran_here: bool = False) -> tuple[Path, list[dict]]:
     """A root whose fleet csv holds the fleet table's recorded jobs (made from their records' results.json)
-    beside a link to the records; and those jobs' results."""
+    beside a link to the records; and those jobs' results. The csv's job directories are where the jobs
+    ran, gone since (``ran_here``: the records themselves, as where the jobs still are)."""
     from evcd.report.fleet_regions import CSV, RECORDS
     from evcd.report.fleet_table import fleet_csv_text, fleet_job
 
     jobs, results = [], []
     for path in sorted((ROOT / RECORDS).glob("*/*/results.json")):
         results.append(json.loads(path.read_text()))
-        jobs.append(fleet_job(results[-1], path.parent))
+        ran = path.parent if ran_here else tmp_path / "gone" / path.parent.parent.name / path.parent.name
+        jobs.append(fleet_job(results[-1], ran))
     root = tmp_path / "repo"
-    (root / CSV).parent.mkdir(parents=True)
+    (root / CSV).parent.mkdir(parents=True, exist_ok=True)
     (root / CSV).write_text(fleet_csv_text(jobs))
-    (root / RECORDS.parent).symlink_to(ROOT / RECORDS.parent)
+    if not (root / RECORDS.parent).exists():
+        (root / RECORDS.parent).symlink_to(ROOT / RECORDS.parent)
     return root, results
 
 
@@ -340,9 +343,14 @@ def test_the_per_day_reading_reads_the_jobs_records(tmp_path):
     assert len(days) >= 5, "the fleet table's records hold at least one seed at share 1"
     first = max(days, key=lambda d: travel["queue_aware", d] - travel["central", d])
     assert f"(the largest queue_aware - central gaps: days {first}, " in per_day(root)
+    reading = per_day(root)
     (root / RECORDS.parent).unlink()
     with pytest.raises(ValueError, match="needs the table's records"):
         per_day(root)
+    # jobs whose run directories are still where they ran are read there, records or not
+    root, _ = _recorded_root(tmp_path, ran_here=True)
+    (root / RECORDS.parent).unlink()
+    assert per_day(root) == reading
 
 
 def test_the_cost_line_reads_the_jobs_and_the_manifest(tmp_path):

@@ -496,6 +496,10 @@ def test_a_page_definition_is_checked_with_the_allowed_values_named(tmp_path):
         {**page, "renders": [{**page["renders"][0], "kind": "pie"}]})  # fmt: skip
     assert "sweeps ['nope']: the page's sweeps are greedy, queue" in refused(
         {**page, "renders": [{**page["renders"][0], "sweeps": ["nope"]}]})  # fmt: skip
+    csv_entry = page["renders"][0]["compare"][0]
+    table = {**page["renders"][0], "compare": [{**csv_entry, "ignore_regions": ["fleet-cost"]}]}
+    assert "ignore_regions belongs to a regions compare entry, not csv" in refused(
+        {**page, "renders": [table]})  # fmt: skip
     assert "two sweeps share a job" in refused(
         {**page, "sweeps": [sweep, {**sweep, "name": "again"}], "renders": []}
     )
@@ -593,3 +597,9 @@ def test_a_pages_generated_regions_are_rendered_from_the_new_data(tmp_path):
     assert (
         "README.md:" in found and "column 'random' of row '200': '536.8 [471.4, 602.2]' -> '537.0 [" in found
     )
+    # an ignored region is not rendered (the changed data leave the page as it is); a name the page lacks
+    # is a difference
+    assert region_differences("README.md", ROOT, {"docs/results.csv": new}, ignore=["results-headline"]) == []
+    ignore = ["results-headline", "no-such"]
+    (lacking,) = region_differences("README.md", ROOT, {"docs/results.csv": new}, ignore=ignore)
+    assert lacking.startswith("README.md: no generated region 'no-such' to ignore (its regions: results-")

@@ -13,7 +13,8 @@ Three comparisons (a page's ``compare`` entries, :class:`evcd.report.reproduce.s
   first cells, then cell by cell as :func:`evcd.report.pages.differences` says it (bold ignored). A
   rendered row the page lacks is a difference; the page's rows made by other runs are only counted.
 - ``regions``: a page's generated regions (``<!-- generated: ... -->``) rendered from the new data in
-  place of the committed files (:func:`evcd.report.pages.render_page`), against the page.
+  place of the committed files (:func:`evcd.report.pages.render_page`), against the page; but the
+  ignored ones (what the jobs cost on the machine that ran them).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from evcd.report.markdown import section_lines, tables
-from evcd.report.pages import differences, render_page
+from evcd.report.pages import differences, regions, render_page
 from evcd.report.reproduce.spec import Compare, Page
 
 
@@ -161,14 +162,20 @@ def _mirror(src: Path, dst: Path, replace: Mapping[tuple[str, ...], Path]) -> No
             _mirror(src / head, dst / head, below)
 
 
-def region_differences(page: str, root: Path, data: Mapping[str, Path]) -> list[str]:
+def region_differences(
+    page: str, root: Path, data: Mapping[str, Path], ignore: Sequence[str] = ()
+) -> list[str]:
     """Where the page ``page`` (relative to ``root``) differs from its generated regions rendered with
-    the committed files of ``data`` replaced by the new ones."""
+    the committed files of ``data`` replaced by the new ones; the regions named in ``ignore`` are not
+    rendered (one the page lacks is a difference)."""
     text = (Path(root) / page).read_text()
+    names = [name for name, _, _ in regions(text)]
+    lacking = [f"{page}: no generated region {name!r} to ignore (its regions: {', '.join(names)})"
+               for name in ignore if name not in names]  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         _mirror(Path(root), Path(tmp), {Path(rel).parts: Path(new) for rel, new in data.items()})
-        rendered = render_page(text, Path(tmp))
-    return differences(text, rendered, page)
+        rendered = render_page(text, Path(tmp), keep=ignore)
+    return lacking + differences(text, rendered, page)
 
 
 # ---------------------------------------------------------------------------------------- a page
@@ -178,7 +185,8 @@ def compare_one(entry: Compare, folder: Path, root: Path) -> tuple[list[str], li
     if not committed.is_file():
         return [f"{entry.committed}: no such committed file (under {root})"], []
     if entry.kind == "regions":
-        return region_differences(entry.committed, root, {k: folder / v for k, v in entry.data.items()}), []
+        data = {k: folder / v for k, v in entry.data.items()}
+        return region_differences(entry.committed, root, data, entry.ignore_regions), []
     rendered = folder / entry.file
     if not rendered.is_file():
         return [f"{rendered}: not rendered"], []

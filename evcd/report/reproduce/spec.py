@@ -94,6 +94,8 @@ class Compare:
         ignore_columns: columns not compared (default :data:`NOT_RESULTS` for ``csv``).
         key: ``csv``: the columns rows are matched by (default: the table kind's job key).
         data: ``regions``: committed data file -> the rendered file that replaces it.
+        ignore_regions: ``regions``: the page's regions not compared (measured costs, which differ from
+            run to run).
     """
 
     kind: str
@@ -103,6 +105,7 @@ class Compare:
     ignore_columns: tuple[str, ...] = ()
     key: tuple[str, ...] = ()
     data: Mapping[str, str] = field(default_factory=dict)
+    ignore_regions: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -236,8 +239,8 @@ def _sweep(data: Any) -> Sweep:
 
 
 def _compare(data: Any, render: str, kind: str) -> Compare:
-    d = _fields(data, f"render {render!r}: a compare entry", ("kind",),
-                ("file", "committed", "section", "ignore_columns", "key", "data"))  # fmt: skip
+    optional = ("file", "committed", "section", "ignore_columns", "key", "data", "ignore_regions")
+    d = _fields(data, f"render {render!r}: a compare entry", ("kind",), optional)
     ckind = _choice(d["kind"], COMPARE_KINDS, f"render {render!r}: compare kind")
     needs = {
         "csv": ("file", "committed"),
@@ -251,6 +254,8 @@ def _compare(data: Any, render: str, kind: str) -> Compare:
     if ckind == "csv" and not key:
         raise PageError(f"render {render!r}: a csv compare entry of a {kind} render needs key (its columns)")
     default_ignore = NOT_RESULTS if ckind == "csv" else ()
+    if d.get("ignore_regions") and ckind != "regions":
+        raise PageError(f"render {render!r}: ignore_regions belongs to a regions compare entry, not {ckind}")
     data_map = d.get("data") or {}
     if not isinstance(data_map, Mapping):
         raise PageError(f"render {render!r}: data: expected committed file -> rendered file")
@@ -264,6 +269,7 @@ def _compare(data: Any, render: str, kind: str) -> Compare:
         ),
         key=key,
         data={str(k): str(v) for k, v in data_map.items()},
+        ignore_regions=_strings(d.get("ignore_regions") or (), f"render {render!r}: ignore_regions"),
     )
 
 
