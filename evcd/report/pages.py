@@ -46,6 +46,8 @@ GENERATORS: dict[str, Callable[[Path], str]] = {"results-headline": results_regi
                                                 "fleet-per-share": fleet_regions.per_share,
                                                 "fleet-against-rules": fleet_regions.against_rules,
                                                 "fleet-share-verdicts": fleet_regions.share_verdicts,
+                                                "fleet-per-day": fleet_regions.per_day,
+                                                "fleet-cost": fleet_regions.cost,
                                                 "fleet-room": room_regions.room,
                                                 "fleet-room-shares": room_regions.room_shares,
                                                 "fleet-room-worlds": room_regions.room_worlds,

@@ -205,8 +205,8 @@ def _load_yaml(path: Path) -> Any:
 NOT_DEFINING = frozenset({"resume", "env.cache_dir"})
 
 
-def _job_defining(overrides: Any) -> list[str]:
-    """Recorded overrides but those of :data:`NOT_DEFINING`."""
+def job_defining(overrides: Any) -> list[str]:
+    """Overrides but those of :data:`NOT_DEFINING`: what makes a job the job it is."""
     return [str(o) for o in overrides or () if str(o).partition("=")[0].lstrip("+~") not in NOT_DEFINING]
 
 
@@ -216,14 +216,14 @@ def _task_overrides(sweep_dir: Path) -> list[str]:
         task = data["hydra"]["overrides"]["task"]
     except (KeyError, TypeError) as exc:
         raise ResultsError(f"{sweep_dir / MULTIRUN_YAML}: no hydra.overrides.task") from exc
-    return _job_defining(task)
+    return job_defining(task)
 
 
 def job_overrides(job_dir: Path) -> tuple[str, ...]:
     """The overrides a run directory records (``.hydra/overrides.yaml``; none if it has no record), but
     those that never change its results (:data:`NOT_DEFINING`: ``resume``, ``env.cache_dir``)."""
     path = job_dir / OVERRIDES_YAML
-    return tuple(_job_defining(_load_yaml(path))) if path.is_file() else ()
+    return tuple(job_defining(_load_yaml(path))) if path.is_file() else ()
 
 
 def _log_reason(job_dir: Path) -> str:
@@ -319,7 +319,8 @@ def job_result(data: Mapping[str, Any], job_dir: Path) -> JobResult:
 
 
 def read_job(job_dir: Path, overrides: Sequence[str] = (), parse: Parser = job_result) -> Any:
-    """The job's results (``parse`` of its ``results.json``: a :class:`JobResult` by default), or a
+    """The job's results (``parse`` of its ``results.json`` and its run directory, links resolved: a
+    rendering's view of a sweep names where each job ran; a :class:`JobResult` by default), or a
     ``"failed"`` :class:`JobGap` if ``results.json`` is absent or unreadable."""
     path = job_dir / RESULTS_JSON
     if not path.is_file():
@@ -327,7 +328,7 @@ def read_job(job_dir: Path, overrides: Sequence[str] = (), parse: Parser = job_r
         reason = f"no {RESULTS_JSON}; {error}"
         return JobGap("failed", tuple(overrides), job_dir, reason)
     try:
-        return parse(json.loads(path.read_text()), job_dir)
+        return parse(json.loads(path.read_text()), job_dir.resolve())
     except WrongTaskError:
         raise
     except (OSError, ValueError, KeyError, TypeError) as exc:

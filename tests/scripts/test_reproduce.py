@@ -450,6 +450,19 @@ def test_the_shipped_pages_rows_and_sections_are_on_their_committed_pages():
                     assert list(render.options["order"]) == rows, name
 
 
+def test_the_fleet_tables_records_render_the_committed_fleet_table(tmp_path):
+    """The fleet table's records (``docs/fleet_table/runs``, kept by ``reproduce.py fleet --records``)
+    hold every job of the page; rendered from them alone, nothing simulated, the page is the committed
+    one: its csv row by row, its tables cell by cell, the generated regions of the README and the fleet
+    page (those reading the records' episodes among them). The jobs ran with ``env.cache_dir`` set: where
+    the days were cached does not make them other jobs."""
+    records = ROOT / "docs" / "fleet_table" / "runs"
+    assert "env.cache_dir=" in (records / "reproduce.json").read_text()
+    proc = run_script("reproduce.py", "fleet", "--check", records / "sweeps", "--out", tmp_path / "out")
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    assert (tmp_path / "out" / "rendered" / "fleet" / "fleet_results.csv").is_file()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("page", sorted(SHIPPED_JOBS))
 def test_every_job_of_a_shipped_page_composes(page):

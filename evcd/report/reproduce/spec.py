@@ -26,7 +26,7 @@ from typing import Any
 import yaml
 
 from evcd.report.fleet_table import FleetJob
-from evcd.report.sweep import JobResult, ResultsError, canonical_overrides, expand_sweep
+from evcd.report.sweep import JobResult, ResultsError, canonical_overrides, expand_sweep, job_defining
 
 #: The scripts a sweep may run (each composes the config of its stem: ``train.py`` -> ``conf/train.yaml``).
 SCRIPTS = ("train.py", "evaluate.py", "train_sb3.py")
@@ -159,8 +159,9 @@ class Page:
 
 
 def job_key(overrides: Sequence[str]) -> frozenset[tuple[str, str]]:
-    """A job's identity from its overrides (:attr:`PageJob.key`)."""
-    return canonical_overrides(overrides)
+    """A job's identity from its overrides (:attr:`PageJob.key`): those that never change its results
+    (:data:`evcd.report.sweep.NOT_DEFINING`) left out."""
+    return canonical_overrides(job_defining(overrides))
 
 
 def display(script: str, argv: Sequence[str]) -> str:
