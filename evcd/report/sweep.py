@@ -200,8 +200,8 @@ def _load_yaml(path: Path) -> Any:
         raise ResultsError(f"{path}: unreadable ({exc})") from exc
 
 
-# Overrides that never change a job's results: a run continued from its checkpoint is the job it
-# continues, and where the days are cached is where, not what (the cache is safe to delete).
+#: Overrides that never change a job's results: a run continued from its checkpoint is the job it
+#: continues, and where the days are cached is where, not what (the cache is safe to delete).
 NOT_DEFINING = frozenset({"resume", "env.cache_dir"})
 
 
