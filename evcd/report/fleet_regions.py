@@ -22,6 +22,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from evcd.loops.run_files import FLEET_CSV, RESULTS_JSON
 from evcd.report.markdown import interval, markdown_table, signed, verdict
 from evcd.report.markdown import marked_interval as _marked
 from evcd.report.markdown import signed_interval as _signed
@@ -223,10 +224,10 @@ def _record(root: Path, job: Job) -> Path:
         ValueError: neither holds it.
     """
     own = Path(root) / job.job_dir
-    if (own / "results.json").is_file():
+    if (own / RESULTS_JSON).is_file():
         return own
     record = Path(root) / RECORDS / own.parent.name / own.name
-    if not (record / "results.json").is_file():
+    if not (record / RESULTS_JSON).is_file():
         raise ValueError(f"no record of the job {job.job_dir} ({record}): this needs the table's records "
                          "(scripts/reproduce.py fleet --records docs/fleet_table/runs)")  # fmt: skip
     return record
@@ -237,7 +238,7 @@ def _days(root: Path, jobs: dict[int, Job]) -> dict[int, tuple[int, float]]:
     ``fleet_episodes.csv`` (one fleet episode per day)."""
     out = {}
     for job in jobs.values():
-        with open(_record(root, job) / "fleet_episodes.csv", newline="") as f:
+        with open(_record(root, job) / FLEET_CSV, newline="") as f:
             for e in csv.DictReader(f):
                 out[int(e["day"])] = (int(e["guided"]), float(e["guided_travel"]))
     return out

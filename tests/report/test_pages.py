@@ -354,8 +354,8 @@ def test_the_per_day_reading_reads_the_jobs_records(tmp_path):
     days = {d for a, d in travel if a == "central" and ("queue_aware", d) in travel}
     assert len(days) >= 5, "the fleet table's records hold at least one seed at share 1"
     first = max(days, key=lambda d: travel["queue_aware", d] - travel["central", d])
-    assert f"(the largest queue_aware - central gaps: days {first}, " in per_day(root)
     reading = per_day(root)
+    assert f"(the largest queue_aware - central gaps: days {first}, " in reading
     (root / RECORDS.parent).unlink()
     with pytest.raises(ValueError, match="needs the table's records"):
         per_day(root)
