@@ -11,7 +11,8 @@ record), its **renders** (what is made from which sweeps: ``table`` is ``scripts
 differences between two rows of worlds and dispatchers, ``compare`` ``scripts/compare_runs.py``'s table
 of every world and dispatcher) and, per render, the **committed data** it is
 compared with (``csv``: a committed CSV by job key and column; ``markdown``: the tables of a committed
-page by header, row and column; ``regions``: a page's generated regions rendered from the new data).
+page by header, row and column; ``regions``: a page's generated regions rendered from the new data,
+but those named in ``ignore_regions``, measured costs that differ from run to run).
 Unknown keys, kinds and scripts are refused with the allowed ones named (:class:`PageError`).
 """
 
