@@ -36,6 +36,7 @@ from evcd.report.markdown import tables as md_tables
 from evcd.report.reproduce.check import csv_differences, markdown_differences, region_differences
 from evcd.report.reproduce.found import job_groups
 from evcd.report.reproduce.launch import check_launcher
+from evcd.report.reproduce.records import keep_records
 from evcd.report.reproduce.render import log_span, log_wall
 from evcd.report.reproduce.spec import PageError, PageJob, job_key, known_pages, load_page
 from evcd.report.sweep import collect, world_label
@@ -461,6 +462,24 @@ def test_the_fleet_tables_records_render_the_committed_fleet_table(tmp_path):
     proc = run_script("reproduce.py", "fleet", "--check", records / "sweeps", "--out", tmp_path / "out")
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
     assert (tmp_path / "out" / "rendered" / "fleet" / "fleet_results.csv").is_file()
+
+
+def test_records_keep_what_a_page_reads_and_leave_a_learners_training_rows_behind(tmp_path):
+    """A learner's records (the perturbed page's, committed) are its config, results, evaluation
+    episodes and log; its ``train_episodes.csv`` (3,000 rows no page reads) is left behind, so no
+    committed record holds one."""
+    committed = ROOT / "docs" / "perturbed" / "runs"
+    assert not [p for p in ROOT.glob("docs/*/runs/sweeps/**/train_episodes.csv")]
+    out, dest = tmp_path / "out", tmp_path / "records"
+    shutil.copytree(committed, out)
+    learner = next(p.parent for p in sorted((out / "sweeps").rglob("results.json")) if "ddqn" in str(p))
+    (learner / "train_episodes.csv").write_text("episode,seed,travel_time\n0,7,93.0\n")  # training writes it
+    copied = {p.as_posix() for p in keep_records(out, dest, "perturbed")}
+    rel = learner.relative_to(out).as_posix()
+    assert {f"{rel}/results.json", f"{rel}/episodes.csv", f"{rel}/baseline_greedy_episodes.csv",
+            f"{rel}/train.log", f"{rel}/.hydra/config.yaml", "reproduce.json"} <= copied  # fmt: skip
+    assert not [name for name in copied if name.endswith("train_episodes.csv")]
+    assert (learner / "train_episodes.csv").is_file()  # the output folder keeps it
 
 
 @pytest.mark.slow

@@ -5,9 +5,11 @@
 The records of an output folder are its manifest (``reproduce.json``: the page, the overrides, every
 launch timed) and, of each finished job (a ``results.json``), the files its numbers and wall time are
 read from: ``.hydra/overrides.yaml`` (which job it is), ``.hydra/config.yaml`` (the whole config it ran
-with), ``results.json``, the episode CSVs and the job's log, at the same relative paths. Checkpoints,
-TensorBoard events, figures and the jobs that did not finish are left behind (a fleet job's records
-are tens of kB; its checkpoints tens of MB).
+with), ``results.json``, the evaluation's episode CSVs and the job's log, at the same relative paths.
+Checkpoints, TensorBoard events, figures, a learner's training rows (``train_episodes.csv``: no page
+reads them; its 3,000 rows would make a single-target learner's records 0.4 MB instead of tens of kB)
+and the jobs that did not finish are left behind (a fleet job's records are tens of kB; its
+checkpoints tens of MB).
 
 Two uses. Rendering: the records are run directories, so ``reproduce.py <page> --check <records>/sweeps``
 renders the page from them, with no simulation, and compares it with the committed data. Resuming
@@ -29,7 +31,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from evcd.loops.run_files import RESULTS_JSON
+from evcd.loops.run_files import RESULTS_JSON, TRAIN_CSV
 from evcd.report.reproduce.launch import MANIFEST, SWEEPS, read_runs
 from evcd.report.reproduce.spec import PageError
 from evcd.report.sweep import MULTIRUN_YAML, OVERRIDES_YAML
@@ -37,6 +39,8 @@ from evcd.utils.atomic import atomic_write_bytes
 
 #: A finished job's record files, as glob patterns relative to its run directory.
 RECORD_FILES = (OVERRIDES_YAML.as_posix(), ".hydra/config.yaml", RESULTS_JSON, "*.csv", "*.log")
+#: The files of a finished job that match :data:`RECORD_FILES` but no page reads (the training rows).
+LEFT_BEHIND = frozenset({TRAIN_CSV})
 
 
 def _manifest(folder: Path) -> dict[str, Any] | None:
@@ -62,7 +66,7 @@ def record_files(out: Path) -> Iterator[Path]:
             continue
         for pattern in RECORD_FILES:
             for path in sorted(run.path.glob(pattern)):
-                if path.is_file():
+                if path.is_file() and path.name not in LEFT_BEHIND:
                     yield path.relative_to(out)
         sweeps.add(run.path.parent)
     for sweep in sorted(sweeps):
