@@ -617,6 +617,12 @@ def test_markdown_tables_are_compared_by_header_row_and_column():
     found, _ = markdown_differences(rendered, PAGE, "p.md", "## Next", ("wall",))
     assert found[0] == "p.md:19: column 'mean' of row 'greedy | 200': '7.0' -> '1.0'"
     assert markdown_differences(rendered, PAGE, "p.md", "## Absent")[0] == ["p.md: no heading '## Absent'"]
+    # a section whose tables are of another shape than the rendering's compares nothing: a difference
+    reshaped = rendered.replace("| mean | wall |", "| mean (s) | wall |", 1)
+    found, notes = markdown_differences(reshaped, PAGE, "p.md", "## Section", ("wall",))
+    assert notes == ["p.md: no table 'agent | EVs | mean (s) | wall' on the page under '## Section'"]
+    assert found == ["p.md: none of the 1 rendered table(s) is on the page under '## Section' (its tables: "
+                     "'agent | EVs | mean | wall')"]  # fmt: skip
     assert section_lines(PAGE, "## Section")[0][0] == 8  # the code's "#" is not a heading
 
 

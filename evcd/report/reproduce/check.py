@@ -11,7 +11,9 @@ Three comparisons (a page's ``compare`` entries, :class:`evcd.report.reproduce.s
 - ``markdown``: each table of a rendered Markdown file against the table with the same header in the
   committed page (in ``section``, if given; the k-th such table for the k-th), rows matched by their
   first cells, then cell by cell as :func:`evcd.report.pages.differences` says it (bold ignored). A
-  rendered row the page lacks is a difference; the page's rows made by other runs are only counted.
+  rendered row the page lacks is a difference; the page's rows made by other runs are only counted. A
+  rendered table the page lacks is noted; none of them on the page is a difference (the page shows
+  tables of another shape than its jobs make).
 - ``regions``: a page's generated regions (``<!-- generated: ... -->``) rendered from the new data in
   place of the committed files (:func:`evcd.report.pages.render_page`), against the page; but the
   ignored ones (what the jobs cost on the machine that ran them).
@@ -117,14 +119,18 @@ def markdown_differences(
     found: list[str] = []
     notes: list[str] = []
     seen: dict[tuple[str, ...], int] = {}
-    for _, header, rows in tables(section_lines(rendered, None)):
+    where = f" under {section!r}" if section else ""
+    made = tables(section_lines(rendered, None))
+    compared = 0
+    for _, header, rows in made:
         k = seen[tuple(header)] = seen.get(tuple(header), -1) + 1
         same = [t for t in page_tables if t[1] == header]
         title = " | ".join(header)[:60]
         if len(same) <= k:
-            notes.append(f"{name}: no table '{title}' on the page{f' under {section!r}' if section else ''}")
+            notes.append(f"{name}: no table '{title}' on the page{where}")
             continue
         line0, _, old_rows = same[k]
+        compared += 1
         width = _key_width([cells for _, cells in rows])
         old = {tuple(cells[:width]): (n, cells) for n, cells in reversed(old_rows)}
         for _, cells in rows:
@@ -142,6 +148,10 @@ def markdown_differences(
                 found.append(diff.replace(f" of row {cells[0]!r}:", f" of row {label!r}:", 1))
         if old:
             notes.append(f"{name}:{line0}: {len(old)} row(s) of table '{title}' not made by this page's jobs")
+    if made and not compared:
+        shown = ", ".join(f"'{' | '.join(h)[:60]}'" for _, h, _ in page_tables) or "none"
+        found.append(f"{name}: none of the {len(made)} rendered table(s) is on the page{where} "
+                     f"(its tables: {shown})")  # fmt: skip
     return found, notes
 
 
