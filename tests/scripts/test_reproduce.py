@@ -464,6 +464,32 @@ def test_the_fleet_tables_records_render_the_committed_fleet_table(tmp_path):
     assert (tmp_path / "out" / "rendered" / "fleet" / "fleet_results.csv").is_file()
 
 
+def test_the_perturbed_pages_records_render_its_committed_tables_for_every_finished_sweep(tmp_path):
+    """The perturbed page's records (``docs/perturbed/runs``) render, nothing simulated, each of the
+    page's tables whose sweeps have all their jobs there, equal to the committed page (a page file of
+    those sweeps and renders; the whole page once every job is in)."""
+    records = ROOT / "docs" / "perturbed" / "runs" / "sweeps"
+    definition = yaml.safe_load((PAGES / "perturbed.yaml").read_text())
+    page = load_page("perturbed", PAGES)
+
+    def finished(name: str) -> int:
+        return sum(1 for d in records.iterdir() if d.name == name or d.name.startswith(f"{name}-resume")
+                   for r in d.glob("*/results.json"))  # fmt: skip
+
+    done = {sweep.name for sweep in page.sweeps if finished(sweep.name) == len(sweep.jobs())}
+    renders = [r for r in definition["renders"] if set(r["sweeps"]) <= done]
+    assert {"single", "hindsight", "forecast", "kinds"} <= done and renders, done
+    definition["renders"] = renders
+    definition["sweeps"] = [s for s in definition["sweeps"] if s["name"] in done]
+    definition.pop("not_covered", None)
+    part = tmp_path / "perturbed_part.yaml"
+    part.write_text(yaml.safe_dump(definition, sort_keys=False))
+    proc = run_script("reproduce.py", part, "--check", records, "--out", tmp_path / "out", "--root", ROOT)
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    assert "equal to the committed data" in proc.stderr
+    assert {r["name"] for r in renders} >= {"single", "kinds"}
+
+
 def test_records_keep_what_a_page_reads_and_leave_a_learners_training_rows_behind(tmp_path):
     """A learner's records (the perturbed page's, committed) are its config, results, evaluation
     episodes and log; its ``train_episodes.csv`` (3,000 rows no page reads) is left behind, so no
