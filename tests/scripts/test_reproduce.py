@@ -31,11 +31,12 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from evcd.experiments.schema import register_configs
+from evcd.loops.run_files import TRAIN_CSV
 from evcd.report.markdown import section_lines
 from evcd.report.markdown import tables as md_tables
 from evcd.report.reproduce.check import csv_differences, markdown_differences, region_differences
 from evcd.report.reproduce.found import job_groups
-from evcd.report.reproduce.launch import check_launcher
+from evcd.report.reproduce.launch import check_launcher, finished_keys, read_runs
 from evcd.report.reproduce.records import keep_records
 from evcd.report.reproduce.render import log_span, log_wall
 from evcd.report.reproduce.spec import PageError, PageJob, job_key, known_pages, load_page
@@ -471,12 +472,8 @@ def test_the_perturbed_pages_records_render_its_committed_tables_for_every_finis
     records = ROOT / "docs" / "perturbed" / "runs" / "sweeps"
     definition = yaml.safe_load((PAGES / "perturbed.yaml").read_text())
     page = load_page("perturbed", PAGES)
-
-    def finished(name: str) -> int:
-        return sum(1 for d in records.iterdir() if d.name == name or d.name.startswith(f"{name}-resume")
-                   for r in d.glob("*/results.json"))  # fmt: skip
-
-    done = {sweep.name for sweep in page.sweeps if finished(sweep.name) == len(sweep.jobs())}
+    finished = finished_keys(read_runs(records))  # matched by job key, as the page's runs are
+    done = {s.name for s in page.sweeps if all(PageJob(s, combo).key in finished for combo in s.jobs())}
     renders = [r for r in definition["renders"] if set(r["sweeps"]) <= done]
     assert {"single", "hindsight", "forecast", "kinds"} <= done and renders, done
     definition["renders"] = renders
@@ -495,17 +492,17 @@ def test_records_keep_what_a_page_reads_and_leave_a_learners_training_rows_behin
     episodes and log; its ``train_episodes.csv`` (3,000 rows no page reads) is left behind, so no
     committed record holds one."""
     committed = ROOT / "docs" / "perturbed" / "runs"
-    assert not [p for p in ROOT.glob("docs/*/runs/sweeps/**/train_episodes.csv")]
+    assert not [p for p in ROOT.glob(f"docs/*/runs/sweeps/**/{TRAIN_CSV}")]
     out, dest = tmp_path / "out", tmp_path / "records"
     shutil.copytree(committed, out)
     learner = next(p.parent for p in sorted((out / "sweeps").rglob("results.json")) if "ddqn" in str(p))
-    (learner / "train_episodes.csv").write_text("episode,seed,travel_time\n0,7,93.0\n")  # training writes it
+    (learner / TRAIN_CSV).write_text("episode,seed,travel_time\n0,7,93.0\n")  # as training writes it
     copied = {p.as_posix() for p in keep_records(out, dest, "perturbed")}
     rel = learner.relative_to(out).as_posix()
     assert {f"{rel}/results.json", f"{rel}/episodes.csv", f"{rel}/baseline_greedy_episodes.csv",
             f"{rel}/train.log", f"{rel}/.hydra/config.yaml", "reproduce.json"} <= copied  # fmt: skip
-    assert not [name for name in copied if name.endswith("train_episodes.csv")]
-    assert (learner / "train_episodes.csv").is_file()  # the output folder keeps it
+    assert not [name for name in copied if name.endswith(TRAIN_CSV)]
+    assert (learner / TRAIN_CSV).is_file()  # the output folder keeps it
 
 
 @pytest.mark.slow
