@@ -468,12 +468,18 @@ def test_the_fleet_tables_records_render_the_committed_fleet_table(tmp_path):
 def test_the_perturbed_pages_records_render_its_committed_tables_for_every_finished_sweep(tmp_path):
     """The perturbed page's records (``docs/perturbed/runs``) render, nothing simulated, each of the
     page's tables whose sweeps have all their jobs there, equal to the committed page (a page file of
-    those sweeps and renders; the whole page once every job is in)."""
+    those sweeps and renders, checked on those sweeps' records; the whole page once every job is in)."""
     records = ROOT / "docs" / "perturbed" / "runs" / "sweeps"
     definition = yaml.safe_load((PAGES / "perturbed.yaml").read_text())
     page = load_page("perturbed", PAGES)
-    finished = finished_keys(read_runs(records))  # matched by job key, as the page's runs are
+    runs = read_runs(records)
+    finished = finished_keys(runs)  # matched by job key, as the page's runs are
     done = {s.name for s in page.sweeps if all(PageJob(s, combo).key in finished for combo in s.jobs())}
+    keys = {PageJob(s, combo).key for s in page.sweeps if s.name in done for combo in s.jobs()}
+    part_runs = tmp_path / "runs"  # the finished sweeps' records: another sweep's task is not this page's
+    for run in runs:
+        if run.results is not None and job_key(run.overrides) in keys:
+            shutil.copytree(run.path, part_runs / run.path.relative_to(records))
     renders = [r for r in definition["renders"] if set(r["sweeps"]) <= done]
     assert {"single", "hindsight", "forecast", "kinds"} <= done and renders, done
     definition["renders"] = renders
@@ -481,7 +487,7 @@ def test_the_perturbed_pages_records_render_its_committed_tables_for_every_finis
     definition.pop("not_covered", None)
     part = tmp_path / "perturbed_part.yaml"
     part.write_text(yaml.safe_dump(definition, sort_keys=False))
-    proc = run_script("reproduce.py", part, "--check", records, "--out", tmp_path / "out", "--root", ROOT)
+    proc = run_script("reproduce.py", part, "--check", part_runs, "--out", tmp_path / "out", "--root", ROOT)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
     assert "equal to the committed data" in proc.stderr
     assert {r["name"] for r in renders} >= {"single", "kinds"}
@@ -495,7 +501,8 @@ def test_records_keep_what_a_page_reads_and_leave_a_learners_training_rows_behin
     assert not [p for p in ROOT.glob(f"docs/*/runs/sweeps/**/{TRAIN_CSV}")]
     out, dest = tmp_path / "out", tmp_path / "records"
     shutil.copytree(committed, out)
-    learner = next(p.parent for p in sorted((out / "sweeps").rglob("results.json")) if "ddqn" in str(p))
+    learner = next(p.parent for p in sorted((out / "sweeps").rglob("results.json"))
+                   if "ddqn" in str(p) and p.parent.parent.name.startswith("single"))  # single target
     (learner / TRAIN_CSV).write_text("episode,seed,travel_time\n0,7,93.0\n")  # as training writes it
     copied = {p.as_posix() for p in keep_records(out, dest, "perturbed")}
     rel = learner.relative_to(out).as_posix()
