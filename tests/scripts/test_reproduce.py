@@ -474,8 +474,9 @@ def test_the_perturbed_pages_records_render_its_committed_tables_for_every_finis
     page = load_page("perturbed", PAGES)
     runs = read_runs(records)
     finished = finished_keys(runs)  # matched by job key, as the page's runs are
-    done = {s.name for s in page.sweeps if all(PageJob(s, combo).key in finished for combo in s.jobs())}
-    keys = {PageJob(s, combo).key for s in page.sweeps if s.name in done for combo in s.jobs()}
+    sweep_keys = {s.name: {PageJob(s, combo).key for combo in s.jobs()} for s in page.sweeps}
+    done = {name for name, keys in sweep_keys.items() if keys <= finished}
+    keys = set().union(*(sweep_keys[name] for name in done))
     part_runs = tmp_path / "runs"  # the finished sweeps' records: another sweep's task is not this page's
     for run in runs:
         if run.results is not None and job_key(run.overrides) in keys:
