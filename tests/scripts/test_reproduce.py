@@ -479,6 +479,11 @@ def test_the_perturbed_pages_records_render_the_committed_page(tmp_path):
     assert "equal to the committed data" in proc.stderr
     rendered = {p.parent.name for p in (tmp_path / "out" / "rendered").glob("*/*.md")}
     assert {"goal", "single", "kinds", "fleet", "fleet_g", "fleet_kinds"} <= rendered, rendered
+    for name in ("kinds", "fleet_kinds"):  # the figures the page shows, drawn from the same records
+        png = tmp_path / "out" / "rendered" / name / f"{name}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+        assert f"](perturbed/{name}.png)" in (ROOT / "docs" / "PERTURBED.md").read_text()
+        assert (ROOT / "docs" / "perturbed" / f"{name}.png").is_file()
 
 
 def test_records_keep_what_a_page_reads_and_leave_a_learners_training_rows_behind(tmp_path):
@@ -553,6 +558,12 @@ def test_a_page_definition_is_checked_with_the_allowed_values_named(tmp_path):
     assert "two sweeps share a job" in refused(
         {**page, "sweeps": [sweep, {**sweep, "name": "again"}], "renders": []}
     )
+    worlds = page["renders"][-1]  # a compare render: its figure draws each row minus itself calm
+    plain = {**worlds, "options": {**worlds["options"], "against_calm": False, "figure": True}}
+    assert "figure: True is drawn by a compare render with against_calm: true" in refused(
+        {**page, "renders": [plain]})  # fmt: skip
+    seeds = {**page["renders"][1], "options": {"order": ["greedy"], "figure": True}}  # not a compare render
+    assert "figure: True is drawn by a compare render" in refused({**page, "renders": [seeds]})
     with pytest.raises(
         PageError, match=r"no page 'results\.yml': the pages are fleet, perturbed, readme, results, room"
     ):

@@ -11,7 +11,8 @@ seeds [95% t] and its training (decisions, wall time); ``paired_rows`` the rows 
 whose last cell pairs two (world, dispatcher) rows of :class:`evcd.report.compare.Runs` on the same
 episodes (or ``by: seed``, the seeds' means); ``compare`` ``scripts/compare_runs.py``'s table of every
 (world, dispatcher) row of the jobs, paired with ``references`` and, with ``against_calm``, with the same
-dispatcher calm. ``rendered/reproduce.md`` stamps the whole with the
+dispatcher calm (and with ``figure: true``, ``<render>.png``: those differences drawn,
+:mod:`evcd.report.calm_figure`). ``rendered/reproduce.md`` stamps the whole with the
 environment, code and machine of its jobs (:mod:`evcd.report.stamp`) and lists each sweep's launches
 and each job's wall time (training, from ``results.json``; the whole job, from its log's first and
 last lines).
@@ -32,6 +33,7 @@ import numpy as np
 import yaml
 
 from evcd.loops.run_files import ENVIRONMENTS
+from evcd.report.calm_figure import plot_against_calm
 from evcd.report.compare import FLEET_MEASURES, Runs, compare_markdown
 from evcd.report.fleet_table import make_fleet_table
 from evcd.report.markdown import markdown_table, num
@@ -147,11 +149,17 @@ def compare_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> li
     ``options['against_calm']`` each perturbed row minus the same dispatcher calm; only the rows of
     ``options['worlds']`` where it names some (the references and the calm rows may lie outside them);
     fleet runs on ``options['fleet_measure']`` (default the guided EVs' travel time)."""
+    runs, worlds = _compared(jobs, options)
+    references = [_row(runs, r, "references", "compare") for r in options.get("references") or ()]
+    return compare_markdown(runs, references, bool(options.get("against_calm")), worlds).splitlines()
+
+
+def _compared(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> tuple[Runs, list[str]]:
+    """A ``compare`` render's runs (on its ``fleet_measure``) and the worlds it shows (``[]``: all)."""
     measure = str(options.get("fleet_measure") or "guided_travel")
     if measure not in FLEET_MEASURES:
         raise PageError(f"compare: fleet_measure={measure!r}: choose one of {', '.join(FLEET_MEASURES)}")
     runs = Runs.read(list(jobs.values()), measure)
-    references = [_row(runs, r, "references", "compare") for r in options.get("references") or ()]
     worlds = [str(w) for w in options.get("worlds") or ()]
     if worlds:
         known = {w for w, _ in runs.rows()}
@@ -159,7 +167,22 @@ def compare_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> li
         if unknown:
             known_text = ", ".join(sorted(known))
             raise PageError(f"compare: worlds {unknown} not among the jobs' worlds: {known_text}")
-    return compare_markdown(runs, references, bool(options.get("against_calm")), worlds).splitlines()
+    return runs, worlds
+
+
+def against_calm_figure(jobs: Mapping[PageJob, Path], options: Mapping[str, Any], path: Path) -> Path:
+    """A ``compare`` render's figure (``options['figure']``): each row it shows minus the same
+    dispatcher calm (:func:`evcd.report.calm_figure.plot_against_calm`), in the order of ``worlds``
+    where it names them."""
+    runs, worlds = _compared(jobs, options)
+    order = {w: i for i, w in enumerate(worlds)}
+    rows = [(w, a, p) for w, a in runs.rows() if not worlds or w in order
+            for p in [runs.against_calm((w, a))] if p is not None]  # fmt: skip
+    rows.sort(key=lambda r: (order.get(r[0], 0), r[0]))
+    if not rows:
+        raise PageError("compare: figure: no row it shows is perturbed with a calm run of its dispatcher to "
+                        "draw against")  # fmt: skip
+    return plot_against_calm(rows, path)
 
 
 def paired_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> list[str]:
@@ -284,7 +307,10 @@ def render_one(render: Render, views: Mapping[str, Path], found: Found, folder: 
         lines += ["", *stamp_markdown(stamps, ENVIRONMENTS[task])]
     text = "\n".join(lines) + "\n"
     folder.mkdir(parents=True)
-    return [atomic_write_text(folder / str(render.options.get("file") or f"{render.name}.md"), text)]
+    written = [atomic_write_text(folder / str(render.options.get("file") or f"{render.name}.md"), text)]
+    if render.kind == "compare" and render.options.get("figure"):
+        written.append(against_calm_figure(jobs, render.options, folder / f"{render.name}.png"))
+    return written
 
 
 def render_page(

@@ -286,6 +286,9 @@ def _render(data: Any, sweeps: Sequence[str]) -> Render:
     options = d.get("options") or {}
     if not isinstance(options, Mapping):
         raise PageError(f"render {name!r}: options: expected a mapping")
+    if options.get("figure") and not (kind == "compare" and options.get("against_calm")):
+        raise PageError(f"render {name!r}: figure: {options['figure']!r} is drawn by a compare render with "
+                        "against_calm: true (each row minus the same dispatcher calm)")  # fmt: skip
     compare = tuple(_compare(c, name, kind) for c in d.get("compare") or ())
     return Render(name, kind, used, compare, dict(options))
 
