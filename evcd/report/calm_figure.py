@@ -21,14 +21,13 @@ from evcd.utils.atomic import atomic_write_png
 CalmRow = tuple[str, str, PairedStat]
 
 
-def plot_against_calm(rows: Sequence[CalmRow], path: str | Path, title: str = "") -> Path:
+def plot_against_calm(rows: Sequence[CalmRow], path: str | Path) -> Path:
     """Save the figure of ``rows`` (each perturbed row minus the same dispatcher calm) to ``path``.
 
     Args:
         rows: (world, dispatcher, paired difference); the panels follow the dispatchers' first
             appearance, the bars the worlds'.
         path: PNG to write (atomically).
-        title: the figure's title (default: what the bars are).
 
     Raises:
         ValueError: no row.
@@ -67,8 +66,8 @@ def plot_against_calm(rows: Sequence[CalmRow], path: str | Path, title: str = ""
         ax.set_title(agent)
         ax.grid(axis="x", alpha=0.3)
         ax.set_axisbelow(True)
-    default = ("Perturbed minus calm, paired by episode: mean over seeds, 95% t interval across seeds, "
+    title = ("Perturbed minus calm, paired by episode: mean over seeds, 95% t interval across seeds, "
                "each seed a dot (red / blue: slower / faster, interval clear of 0)")  # fmt: skip
-    fig.suptitle(title or default, fontsize=10)
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return atomic_write_png(fig, path)

@@ -33,7 +33,7 @@ import numpy as np
 import yaml
 
 from evcd.loops.run_files import ENVIRONMENTS
-from evcd.report.calm_figure import plot_against_calm
+from evcd.report.calm_figure import CalmRow, plot_against_calm
 from evcd.report.compare import FLEET_MEASURES, Runs, compare_markdown
 from evcd.report.fleet_table import make_fleet_table
 from evcd.report.markdown import markdown_table, num
@@ -143,19 +143,20 @@ def by_seed(runs: Runs, a: tuple[str, str], b: tuple[str, str]) -> SeedStat:
                          for s in sorted(ta.keys() & tb.keys()))  # fmt: skip
 
 
-def compare_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> list[str]:
-    """``scripts/compare_runs.py``'s table of the jobs: every (world, dispatcher) row, its difference
-    with each ``options['references']`` row (``world/dispatcher``) paired by episode, and with
-    ``options['against_calm']`` each perturbed row minus the same dispatcher calm; only the rows of
-    ``options['worlds']`` where it names some (the references and the calm rows may lie outside them);
-    fleet runs on ``options['fleet_measure']`` (default the guided EVs' travel time)."""
-    runs, worlds = _compared(jobs, options)
+def compare_rows(runs: Runs, worlds: Sequence[str], options: Mapping[str, Any]) -> list[str]:
+    """``scripts/compare_runs.py``'s table of a ``compare`` render's runs (:func:`compared`): every
+    (world, dispatcher) row, its difference with each ``options['references']`` row
+    (``world/dispatcher``) paired by episode, and with ``options['against_calm']`` each perturbed row
+    minus the same dispatcher calm; only the rows of ``worlds`` where it names some (the references and
+    the calm rows may lie outside them)."""
     references = [_row(runs, r, "references", "compare") for r in options.get("references") or ()]
     return compare_markdown(runs, references, bool(options.get("against_calm")), worlds).splitlines()
 
 
-def _compared(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> tuple[Runs, list[str]]:
-    """A ``compare`` render's runs (on its ``fleet_measure``) and the worlds it shows (``[]``: all)."""
+def compared(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> tuple[Runs, list[str]]:
+    """A ``compare`` render's runs, read once for its table and its figure (fleet runs on
+    ``options['fleet_measure']``, default the guided EVs' travel time), and the worlds it shows
+    (``options['worlds']``; ``[]``: all)."""
     measure = str(options.get("fleet_measure") or "guided_travel")
     if measure not in FLEET_MEASURES:
         raise PageError(f"compare: fleet_measure={measure!r}: choose one of {', '.join(FLEET_MEASURES)}")
@@ -170,11 +171,14 @@ def _compared(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> tuple
     return runs, worlds
 
 
-def against_calm_figure(jobs: Mapping[PageJob, Path], options: Mapping[str, Any], path: Path) -> Path:
-    """A ``compare`` render's figure (``options['figure']``): each row it shows minus the same
-    dispatcher calm (:func:`evcd.report.calm_figure.plot_against_calm`), in the order of ``worlds``
-    where it names them."""
-    runs, worlds = _compared(jobs, options)
+def calm_rows(runs: Runs, worlds: Sequence[str]) -> list[CalmRow]:
+    """What a ``compare`` render's figure (``options['figure']``) draws: each row it shows minus the
+    same dispatcher calm (:func:`evcd.report.calm_figure.plot_against_calm`), in the order of ``worlds``
+    where it names them.
+
+    Raises:
+        PageError: no row it shows has a calm run of its dispatcher.
+    """
     order = {w: i for i, w in enumerate(worlds)}
     rows = [(w, a, p) for w, a in runs.rows() if not worlds or w in order
             for p in [runs.against_calm((w, a))] if p is not None]  # fmt: skip
@@ -182,7 +186,7 @@ def against_calm_figure(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]
     if not rows:
         raise PageError("compare: figure: no row it shows is perturbed with a calm run of its dispatcher to "
                         "draw against")  # fmt: skip
-    return plot_against_calm(rows, path)
+    return rows
 
 
 def paired_rows(jobs: Mapping[PageJob, Path], options: Mapping[str, Any]) -> list[str]:
@@ -293,11 +297,15 @@ def render_one(render: Render, views: Mapping[str, Path], found: Found, folder: 
     if render.kind == "fleet_table":
         return list(make_fleet_table(dirs, folder).paths)
     jobs = found.of(render.sweeps)
+    figure: list[CalmRow] = []
     if render.kind == "seed_rows":
         results = {j: found.results[j] for j in jobs}
         table = seed_rows(jobs, results, render.options)
     elif render.kind == "compare":
-        table = compare_rows(jobs, render.options)
+        runs, worlds = compared(jobs, render.options)
+        table = compare_rows(runs, worlds, render.options)
+        if render.options.get("figure"):  # before anything is written
+            figure = calm_rows(runs, worlds)
     else:
         table = paired_rows(jobs, render.options)
     title = str(render.options.get("title") or render.name)
@@ -308,8 +316,8 @@ def render_one(render: Render, views: Mapping[str, Path], found: Found, folder: 
     text = "\n".join(lines) + "\n"
     folder.mkdir(parents=True)
     written = [atomic_write_text(folder / str(render.options.get("file") or f"{render.name}.md"), text)]
-    if render.kind == "compare" and render.options.get("figure"):
-        written.append(against_calm_figure(jobs, render.options, folder / f"{render.name}.png"))
+    if figure:
+        written.append(plot_against_calm(figure, folder / f"{render.name}.png"))
     return written
 
 
